@@ -1,0 +1,542 @@
+"""The swarmcover wire contract: typed messages, encoded as msgpack maps.
+
+Every message is a dataclass registered under a type tag. On the wire it is a msgpack
+map ``{"_t": tag, "_v": version, field: value, ...}``. Decoding checks the tag, the
+schema version, every field's type, range and finiteness, and cross-field lengths, and
+raises :class:`WireError` naming the message type and the field.
+
+Units and frames, unless a field says otherwise:
+  * lengths in metres, times in seconds, angles in radians;
+  * bearings are body-frame, CCW positive, in [-pi, pi];
+  * poses (x, y, theta) are in the world frame of the map.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable, ClassVar
+
+import msgpack
+
+PI = math.pi
+_ABSURD_SPEED = 100.0  # m/s or rad/s: anything larger is a bug or an attack
+_MAX_LIST = 100_000
+_MAX_STR = 1_000
+
+
+class WireError(ValueError):
+    """A payload that does not decode to a valid message. ``field`` names the culprit."""
+
+    def __init__(self, msg_type: str, field: str, reason: str):
+        self.msg_type = msg_type
+        self.field = field
+        self.reason = reason
+        super().__init__(f"{msg_type}.{field}: {reason}")
+
+
+# --------------------------------------------------------------------------- fields
+# A field checker takes (value) and returns the normalised value or raises ValueError.
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _check_float(v: Any, lo: float, hi: float) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ValueError(f"expected a number, got {type(v).__name__}")
+    v = float(v)
+    if not math.isfinite(v):
+        raise ValueError(f"not finite: {v}")
+    if v < lo or v > hi:
+        raise ValueError(f"{v} outside [{lo}, {hi}]")
+    return v
+
+
+def _check_int(v: Any, lo: int, hi: int) -> int:
+    if not _is_int(v):
+        raise ValueError(f"expected an integer, got {type(v).__name__}")
+    if v < lo or v > hi:
+        raise ValueError(f"{v} outside [{lo}, {hi}]")
+    return v
+
+
+def f_float(lo: float = -1e9, hi: float = 1e9, default: float = 0.0):
+    return field(default=default, metadata={"check": lambda v: _check_float(v, lo, hi)})
+
+
+def f_int(lo: int = -(2**62), hi: int = 2**62, default: int = 0):
+    return field(default=default, metadata={"check": lambda v: _check_int(v, lo, hi)})
+
+
+def f_bool(default: bool = False):
+    def check(v):
+        if not isinstance(v, bool):
+            raise ValueError(f"expected a bool, got {type(v).__name__}")
+        return v
+    return field(default=default, metadata={"check": check})
+
+
+def f_str(choices: tuple[str, ...] | None = None, maxlen: int = _MAX_STR, default: str = ""):
+    def check(v):
+        if not isinstance(v, str):
+            raise ValueError(f"expected a string, got {type(v).__name__}")
+        if len(v) > maxlen:
+            raise ValueError(f"longer than {maxlen} characters")
+        if choices is not None and v not in choices:
+            raise ValueError(f"{v!r} not one of {', '.join(choices)}")
+        return v
+    return field(default=default, metadata={"check": check})
+
+
+def _list(v: Any) -> list:
+    if not isinstance(v, (list, tuple)):
+        raise ValueError(f"expected a list, got {type(v).__name__}")
+    if len(v) > _MAX_LIST:
+        raise ValueError(f"list longer than {_MAX_LIST}")
+    return list(v)
+
+
+def f_floats(lo: float = -1e9, hi: float = 1e9):
+    def check(v):
+        out = _list(v)
+        for k, x in enumerate(out):
+            try:
+                out[k] = _check_float(x, lo, hi)
+            except ValueError as e:
+                raise ValueError(f"[{k}]: {e}") from None
+        return out
+    return field(default_factory=list, metadata={"check": check})
+
+
+def f_ints(lo: int = -(2**62), hi: int = 2**62):
+    def check(v):
+        out = _list(v)
+        for k, x in enumerate(out):
+            try:
+                _check_int(x, lo, hi)
+            except ValueError as e:
+                raise ValueError(f"[{k}]: {e}") from None
+        return out
+    return field(default_factory=list, metadata={"check": check})
+
+
+def f_bools():
+    def check(v):
+        out = _list(v)
+        for k, x in enumerate(out):
+            if not isinstance(x, bool):
+                raise ValueError(f"[{k}]: expected a bool, got {type(x).__name__}")
+        return out
+    return field(default_factory=list, metadata={"check": check})
+
+
+def f_polys(lo: float = -1e6, hi: float = 1e6):
+    """A list of polygons, each a flat list [x0, y0, x1, y1, ...] (world frame, m)."""
+    def check(v):
+        out = _list(v)
+        for k, poly in enumerate(out):
+            p = _list(poly)
+            if len(p) % 2:
+                raise ValueError(f"[{k}]: odd number of coordinates")
+            for m, x in enumerate(p):
+                try:
+                    p[m] = _check_float(x, lo, hi)
+                except ValueError as e:
+                    raise ValueError(f"[{k}][{m}]: {e}") from None
+            out[k] = p
+        return out
+    return field(default_factory=list, metadata={"check": check})
+
+
+# --------------------------------------------------------------------------- registry
+
+REGISTRY: dict[str, type["Message"]] = {}
+
+
+class Message:
+    """Base of every wire message. Subclasses are dataclasses registered with @message."""
+
+    TAG: ClassVar[str] = ""
+    VERSION: ClassVar[int] = 1
+    _FIELDS: ClassVar[tuple] = ()
+    _SAME_LEN: ClassVar[tuple] = ()  # groups of list fields that must have equal lengths
+
+    def encode(self) -> bytes:
+        return encode(self)
+
+    def to_dict(self) -> dict:
+        d = {"_t": self.TAG, "_v": self.VERSION}
+        for name, _ in self._FIELDS:
+            d[name] = getattr(self, name)
+        return d
+
+    def validate(self) -> "Message":
+        """Check this instance as decoding would; returns self or raises WireError."""
+        _validate_into(type(self), {k: _plain(v) for k, v in self.to_dict().items()})
+        return self
+
+
+def message(tag: str, version: int = 1, same_len: tuple = ()):
+    """Class decorator: make a slotted dataclass and register it under ``tag``."""
+
+    def wrap(cls):
+        cls = dataclass(slots=True)(cls)
+        cls.TAG = tag
+        cls.VERSION = version
+        cls._SAME_LEN = same_len
+        cls._FIELDS = tuple((f.name, f.metadata["check"]) for f in dataclasses.fields(cls))
+        if tag in REGISTRY:
+            raise RuntimeError(f"duplicate message tag {tag}")
+        REGISTRY[tag] = cls
+        return cls
+
+    return wrap
+
+
+def _plain(v: Any) -> Any:
+    """numpy scalars/arrays to plain Python for msgpack."""
+    tolist = getattr(v, "tolist", None)
+    return tolist() if tolist is not None else v
+
+
+def encode(msg: Message) -> bytes:
+    """Serialise a message to msgpack bytes. Does not validate (call .validate() for that)."""
+    d = {"_t": msg.TAG, "_v": msg.VERSION}
+    for name, _ in msg._FIELDS:
+        d[name] = _plain(getattr(msg, name))
+    return msgpack.packb(d, use_bin_type=True)
+
+
+def _validate_into(cls, d: dict, target=None):
+    vals = {}
+    for name, check in cls._FIELDS:
+        if name not in d:
+            raise WireError(cls.TAG, name, "missing")
+        try:
+            vals[name] = check(d[name])
+        except ValueError as e:
+            raise WireError(cls.TAG, name, str(e)) from None
+    for group in cls._SAME_LEN:
+        lens = {n: len(vals[n]) for n in group}
+        if len(set(lens.values())) > 1:
+            raise WireError(cls.TAG, group[-1], f"length mismatch: {lens}")
+    if target is not None:
+        return target
+    obj = cls(**vals)
+    post = getattr(obj, "_post_check", None)
+    if post is not None:
+        post()
+    return obj
+
+
+def decode(data: bytes, expected: type | tuple | None = None) -> Message:
+    """Decode and validate a payload. Raises WireError on anything wrong.
+
+    ``expected``: a message class (or tuple of classes) the payload must be.
+    """
+    name = expected.TAG if isinstance(expected, type) else "Message"
+    try:
+        d = msgpack.unpackb(bytes(data), raw=False, strict_map_key=True, max_bin_len=0,
+                            max_ext_len=0)
+    except Exception as e:  # msgpack raises several types for garbage
+        raise WireError(name, "_payload", f"not msgpack: {e.__class__.__name__}: {e}") from None
+    if not isinstance(d, dict):
+        raise WireError(name, "_payload", f"expected a map, got {type(d).__name__}")
+    tag = d.get("_t")
+    cls = REGISTRY.get(tag) if isinstance(tag, str) else None
+    if cls is None:
+        raise WireError(name, "_t", f"unknown message type {tag!r}")
+    if expected is not None:
+        exp = expected if isinstance(expected, tuple) else (expected,)
+        if cls not in exp:
+            raise WireError(name, "_t", f"got {tag}, expected {' or '.join(c.TAG for c in exp)}")
+    ver = d.get("_v")
+    if ver != cls.VERSION:
+        raise WireError(cls.TAG, "_v", f"schema version {ver!r}, this build speaks {cls.VERSION}")
+    extra = set(d) - {"_t", "_v"} - {n for n, _ in cls._FIELDS}
+    if extra:
+        raise WireError(cls.TAG, sorted(extra)[0], "unknown field")
+    return _validate_into(cls, d)
+
+
+def decode_to_dict(data: bytes) -> dict:
+    """Decode and validate, returning a JSON-friendly dict with _t and _v (for inspection)."""
+    return decode(data).to_dict()
+
+
+# --------------------------------------------------------------------------- messages
+
+ANGLE = dict(lo=-PI - 1e-9, hi=PI + 1e-9)
+ROBOT_KINDS = ("holonomic", "diffdrive")
+
+
+@message("Sense", same_len=(("ids", "bearings", "back_bearings"), ("touch", "touch_robot")))
+class Sense(Message):
+    """World -> agent, one per robot per tick: what the robot's camera and bumpers feel.
+
+    ids/bearings: visible robots and their body-frame bearings (rad).
+    back_bearings: for each visible robot l, the bearing at which l sees this robot, in l's
+      body frame (rad) -- emulates neighbours telling each other (spec 1.5); used for frame
+      alignment (spec 4.7).
+    touch: body-frame centre bearings (rad) of active contact sectors; touch_robot: whether a
+      robot is visible in that sector's direction (then the contact is not an obstacle).
+    """
+    robot: int = f_int(0)
+    tick: int = f_int(0)
+    t: float = f_float(0.0)
+    ids: list = f_ints(0)
+    bearings: list = f_floats(**ANGLE)
+    back_bearings: list = f_floats(**ANGLE)
+    touch: list = f_floats(**ANGLE)
+    touch_robot: list = f_bools()
+
+
+@message("CmdVel")
+class CmdVel(Message):
+    """Agent -> world (virtual robot) or hwbridge (live robot): velocity command.
+
+    Body frame: vx forward, vy left (m/s), wz CCW (rad/s). Differential drive uses vx and
+    wz only (vy must be 0). tick: the Sense tick this answers (lockstep), -1 if none.
+    """
+    robot: int = f_int(0)
+    tick: int = f_int(-1)
+    vx: float = f_float(-_ABSURD_SPEED, _ABSURD_SPEED)
+    vy: float = f_float(-_ABSURD_SPEED, _ABSURD_SPEED)
+    wz: float = f_float(-_ABSURD_SPEED, _ABSURD_SPEED)
+
+
+@message("Pose")
+class Pose(Message):
+    """A robot pose (world frame). source: who measured it (sim odometry, mocap, agent relay)."""
+    robot: int = f_int(0)
+    t: float = f_float(0.0)
+    x: float = f_float(-1e6, 1e6)
+    y: float = f_float(-1e6, 1e6)
+    theta: float = f_float(**ANGLE)
+    source: str = f_str(("sim", "mocap", "odom", "agent"), default="sim")
+
+
+AGENT_STATES = ("starting", "idle", "holding", "moving", "deploying", "test_driving", "leaving")
+TASK_STATES = ("none", "running", "done", "failed")
+
+
+@message("Status", same_len=(("nbr_ids", "nbr_bearings"),))
+class Status(Message):
+    """Agent -> coordinator, a few Hz and on every task change.
+
+    nbr_ids/nbr_bearings: neighbours seen now (filtered while still), body frame (rad).
+    contact/contact_bearing: sticky obstacle contact (spec 3.5), body frame (rad).
+    pose: [x, y, theta] as reported by the robot's body (telemetry only, may be []).
+    """
+    robot: int = f_int(0)
+    seq: int = f_int(0)
+    t: float = f_float(0.0)
+    kind: str = f_str(ROBOT_KINDS, default="holonomic")
+    live: bool = f_bool()
+    state: str = f_str(AGENT_STATES, default="starting")
+    vertex: int = f_int(-1)
+    task_id: int = f_int(-1)
+    task_state: str = f_str(TASK_STATES, default="none")
+    reason: str = f_str(maxlen=200)
+    progress: float = f_float(0.0, 1.0)
+    nbr_ids: list = f_ints(0)
+    nbr_bearings: list = f_floats(**ANGLE)
+    contact: bool = f_bool()
+    contact_bearing: float = f_float(**ANGLE)
+    pose: list = f_floats(-1e6, 1e6)
+
+    def _post_check(self):
+        if len(self.pose) not in (0, 3):
+            raise WireError(self.TAG, "pose", f"expected 0 or 3 values, got {len(self.pose)}")
+
+
+TASK_KINDS = ("hold", "goto", "deploy", "test_drive", "leave")
+
+
+@message("Task", same_len=(("landmarks", "bearings"),))
+class Task(Message):
+    """Coordinator -> agent: what to do next. A new task replaces the current one.
+
+    hold: stay, record the bearing snapshot, keep station on it.
+    goto: visual homing to ``bearings`` (desired bearing to each landmark robot id, rad, in
+      the reference frame), e.g. a push step to the next vertex.
+    deploy: like goto, with bearings from the assumed geometry (spec 4.4); with fewer than 2
+      landmarks, open-loop along ``direction`` for ``distance``; then scale correction if
+      ``scale_correct``.
+    test_drive: open-loop along ``direction`` for ``distance``; on touch, home back to
+      ``bearings`` and fail with reason "touch".
+    leave: stop and idle (redundant robot).
+    ref_offsets: per landmark, heading of the reference frame minus the landmark's heading
+      (rad), for frame alignment (spec 4.7); [] means frames are parallel (psi = 0).
+    """
+    task_id: int = f_int(0)
+    robot: int = f_int(0)
+    epoch: int = f_int(0)
+    kind: str = f_str(TASK_KINDS, default="hold")
+    vertex: int = f_int(-1)
+    landmarks: list = f_ints(0)
+    bearings: list = f_floats(**ANGLE)
+    ref_offsets: list = f_floats(**ANGLE)
+    direction: float = f_float(**ANGLE)
+    distance: float = f_float(0.0, 1e4)
+    scale_correct: bool = f_bool()
+    timeout_s: float = f_float(0.0, 1e6, default=60.0)
+
+    def _post_check(self):
+        if self.ref_offsets and len(self.ref_offsets) != len(self.landmarks):
+            raise WireError(self.TAG, "ref_offsets", "must be [] or one per landmark")
+
+
+@message("Complex")
+class Complex(Message):
+    """Coordinator -> viewers/recorders, once per deployment cycle.
+
+    vertices/occupants: vertex ids and the robot holding each (-1 empty).
+    edges: flat vertex-id pairs [a0, b0, a1, b1, ...]; triangles: flat triples.
+    frontier/obstacle: indices into the edge list. redundant: vertex ids.
+    state: "running", "certified" (K empty and certificate holds) or "stopped".
+    """
+    cycle: int = f_int(0)
+    t: float = f_float(0.0)
+    epoch: int = f_int(0)
+    vertices: list = f_ints(0)
+    occupants: list = f_ints(-1)
+    edges: list = f_ints(0)
+    triangles: list = f_ints(0)
+    frontier: list = f_ints(0)
+    obstacle: list = f_ints(0)
+    redundant: list = f_ints(0)
+    sources: list = f_ints(0)
+    certified: bool = f_bool()
+    robots: int = f_int(0)
+    state: str = f_str(("running", "certified", "stopped"), default="running")
+
+    def _post_check(self):
+        if len(self.vertices) != len(self.occupants):
+            raise WireError(self.TAG, "occupants", "length differs from vertices")
+        if len(self.edges) % 2:
+            raise WireError(self.TAG, "edges", "odd length: not a list of pairs")
+        if len(self.triangles) % 3:
+            raise WireError(self.TAG, "triangles", "length not a multiple of 3")
+        m = len(self.edges) // 2
+        for name in ("frontier", "obstacle"):
+            bad = [e for e in getattr(self, name) if e >= m]
+            if bad:
+                raise WireError(self.TAG, name, f"edge index {bad[0]} >= {m} edges")
+
+
+@message("Clock")
+class Clock(Message):
+    """World -> all: simulation time. rtf: measured real-time factor (sim s per wall s)."""
+    tick: int = f_int(0)
+    t: float = f_float(0.0)
+    mode: str = f_str(("realtime", "lockstep"), default="realtime")
+    rtf: float = f_float(0.0, 1e6)
+
+
+@message("Spawn")
+class Spawn(Message):
+    """Coordinator (or user) -> world: create robot ``robot`` at source index ``source``.
+
+    live: the body is the twin of a live robot, driven by the hwbridge (TwinCmd), not by
+    the agent's CmdVel.
+    """
+    robot: int = f_int(0)
+    source: int = f_int(0, 1000)
+    kind: str = f_str(ROBOT_KINDS, default="holonomic")
+    live: bool = f_bool()
+
+
+@message("Remove")
+class Remove(Message):
+    """Coordinator (or user, or a test injecting a failure) -> world: delete a robot's body."""
+    robot: int = f_int(0)
+    reason: str = f_str(maxlen=200)
+
+
+@message("Truth", same_len=(("ids", "x", "y", "theta", "live"),))
+class Truth(Message):
+    """World -> recorders/viewers/reports, every tick: ground-truth poses (world frame).
+
+    Never used by agents or the coordinator's decisions.
+    """
+    tick: int = f_int(0)
+    t: float = f_float(0.0)
+    ids: list = f_ints(0)
+    x: list = f_floats(-1e6, 1e6)
+    y: list = f_floats(-1e6, 1e6)
+    theta: list = f_floats(**ANGLE)
+    live: list = f_bools()
+
+
+@message("WorldInfo")
+class WorldInfo(Message):
+    """World queryable reply: the map and the parameters of this run.
+
+    boundary: flat [x0, y0, ...] outer polygon (world frame, m); obstacles: polygons.
+    sources: flat [x, y, theta] per source (base station) pose.
+    """
+    name: str = f_str(maxlen=200)
+    rv: float = f_float(1e-6, 1e6)
+    robot_radius: float = f_float(0.0, 1e6)
+    dt: float = f_float(1e-6, 10.0)
+    mode: str = f_str(("realtime", "lockstep"), default="realtime")
+    seed: int = f_int()
+    boundary: list = f_floats(-1e6, 1e6)
+    obstacles: list = f_polys()
+    sources: list = f_floats(-1e6, 1e6)
+    free_area: float = f_float(0.0, 1e12)
+    config: str = f_str(maxlen=1_000_000)  # the resolved run config, TOML text
+
+
+@message("MocapPose")
+class MocapPose(Message):
+    """Mocap source -> hwbridge: a rigid body's pose in the mocap frame (m, unit quaternion)."""
+    body: str = f_str(maxlen=200)
+    t: float = f_float(0.0)
+    x: float = f_float(-1e6, 1e6)
+    y: float = f_float(-1e6, 1e6)
+    z: float = f_float(-1e6, 1e6)
+    qx: float = f_float(-1.0, 1.0)
+    qy: float = f_float(-1.0, 1.0)
+    qz: float = f_float(-1.0, 1.0)
+    qw: float = f_float(-1.0, 1.0, default=1.0)
+
+
+@message("LiveCmd")
+class LiveCmd(Message):
+    """hwbridge -> live robot driver: unicycle command, already clamped (m/s, rad/s)."""
+    robot: int = f_int(0)
+    t: float = f_float(0.0)
+    v: float = f_float(-_ABSURD_SPEED, _ABSURD_SPEED)
+    omega: float = f_float(-_ABSURD_SPEED, _ABSURD_SPEED)
+
+
+@message("TwinCmd")
+class TwinCmd(Message):
+    """hwbridge -> world: drive a live robot's twin toward its mocap pose.
+
+    vx, vy (m/s) and wz (rad/s) in the world frame; teleport: place the twin at (x, y, theta).
+    """
+    robot: int = f_int(0)
+    t: float = f_float(0.0)
+    vx: float = f_float(-_ABSURD_SPEED, _ABSURD_SPEED)
+    vy: float = f_float(-_ABSURD_SPEED, _ABSURD_SPEED)
+    wz: float = f_float(-_ABSURD_SPEED, _ABSURD_SPEED)
+    teleport: bool = f_bool()
+    x: float = f_float(-1e6, 1e6)
+    y: float = f_float(-1e6, 1e6)
+    theta: float = f_float(**ANGLE)
+
+
+@message("Demo")
+class Demo(Message):
+    """A heartbeat published by ``swarmcover demo`` for smoke tests."""
+    seq: int = f_int(0)
+    t: float = f_float(0.0)
+    text: str = f_str(maxlen=200)
+
+
+ALL_MESSAGES: tuple[type[Message], ...] = tuple(REGISTRY.values())
+Handler = Callable[[Message], None]

@@ -1,0 +1,254 @@
+"""Zenoh session set-up shared by every swarmcover process.
+
+Defaults: client mode connecting to tcp/127.0.0.1:7447, multicast scouting off. Overrides
+are layered as in zenoh-python's examples: ``--config FILE`` first, then ``--mode``,
+``--connect``, ``--listen``, ``--multicast-scouting``, then repeatable ``--cfg PATH:JSON5``.
+
+Rules this module enforces for every process (see shared/spec/zenoh-notes.md):
+  * sessions are closed on every exit path, SIGINT and SIGTERM included (:class:`Shutdown`
+    turns both signals into an event the main loop checks);
+  * Zenoh callbacks never block or call Zenoh: :class:`Mailbox` only enqueues.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import queue
+import signal
+import threading
+import time
+from collections import Counter
+from typing import Any, Iterable
+
+import zenoh
+
+from .keys import Keys
+from .messages import Message, WireError, decode
+
+DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
+log = logging.getLogger("swarmcover.bus")
+
+
+def add_zenoh_args(parser: argparse.ArgumentParser, mode: str = "client") -> None:
+    """Add the standard connection flags to a command's parser."""
+    g = parser.add_argument_group("zenoh")
+    g.add_argument("--config", metavar="FILE", help="Zenoh JSON5 config file (applied first)")
+    g.add_argument("--mode", choices=("client", "peer", "router"), default=None,
+                   help=f"Zenoh mode (default: {mode})")
+    g.add_argument("--connect", "-e", action="append", default=None, metavar="ENDPOINT",
+                   help=f"endpoint to connect to, repeatable (default for clients: {DEFAULT_ROUTER})")
+    g.add_argument("--listen", "-l", action="append", default=None, metavar="ENDPOINT",
+                   help="endpoint to listen on, repeatable")
+    g.add_argument("--multicast-scouting", action="store_true",
+                   help="enable multicast scouting (off by default: explicit endpoints only)")
+    g.add_argument("--cfg", action="append", default=[], metavar="PATH:JSON5",
+                   help='raw config override, repeatable, e.g. --cfg "transport/link/tx/lease:2000"')
+    g.add_argument("--swarm", default=os.environ.get("SWARMCOVER_SWARM", "default"),
+                   help="experiment name scoping every key (env SWARMCOVER_SWARM; default 'default')")
+    g.add_argument("--connect-timeout", type=float, default=10.0, metavar="S",
+                   help="seconds to wait for the router at start (default 10)")
+    parser.set_defaults(_zenoh_mode=mode)
+
+
+def zenoh_argv(args: argparse.Namespace) -> list[str]:
+    """The connection flags of ``args`` as argv, to pass on to child processes."""
+    out: list[str] = []
+    if args.config:
+        out += ["--config", args.config]
+    for e in args.connect or []:
+        out += ["--connect", e]
+    if args.multicast_scouting:
+        out.append("--multicast-scouting")
+    for c in args.cfg or []:
+        out += ["--cfg", c]
+    out += ["--swarm", args.swarm, "--connect-timeout", str(args.connect_timeout)]
+    return out
+
+
+def make_config(args: argparse.Namespace, mode: str | None = None) -> zenoh.Config:
+    """Build a zenoh.Config from the layered flags. Raises ValueError naming a bad flag."""
+    mode = mode or args.mode or getattr(args, "_zenoh_mode", "client")
+    if args.config:
+        try:
+            conf = zenoh.Config.from_file(args.config)
+        except Exception as e:
+            raise ValueError(f"--config {args.config}: {e}") from None
+    else:
+        conf = zenoh.Config()
+    _insert(conf, "mode", json.dumps(mode), "--mode")
+    connect = args.connect
+    if connect is None and mode == "client" and not args.config:
+        connect = [DEFAULT_ROUTER]
+    if connect:
+        _insert(conf, "connect/endpoints", json.dumps(connect), "--connect")
+    if mode == "client":
+        _insert(conf, "connect/timeout_ms", str(int(args.connect_timeout * 1000)), "--connect-timeout")
+    if args.listen:
+        _insert(conf, "listen/endpoints", json.dumps(args.listen), "--listen")
+    _insert(conf, "scouting/multicast/enabled", "true" if args.multicast_scouting else "false",
+            "--multicast-scouting")
+    for c in args.cfg or []:
+        if ":" not in c:
+            raise ValueError(f"--cfg {c!r}: expected PATH:JSON5")
+        path, value = c.split(":", 1)
+        _insert(conf, path, value, f"--cfg {c!r}")
+    return conf
+
+
+def _insert(conf: zenoh.Config, path: str, value: str, flag: str) -> None:
+    try:
+        conf.insert_json5(path, value)
+    except Exception as e:
+        raise ValueError(f"{flag}: cannot set {path} = {value}: {e}") from None
+
+
+def open_session(args: argparse.Namespace, mode: str | None = None) -> zenoh.Session:
+    """Open a session from the flags; a client waits up to --connect-timeout for the router."""
+    conf = make_config(args, mode)
+    try:
+        return zenoh.open(conf)
+    except Exception as e:
+        where = ", ".join(args.connect or [DEFAULT_ROUTER])
+        raise ConnectionError(
+            f"cannot open a Zenoh session ({mode or args.mode or args._zenoh_mode} mode, "
+            f"router {where}): {e}. Is `swarmcover router` running?") from None
+
+
+class Shutdown:
+    """SIGINT/SIGTERM -> an event. Use as a context manager in every process's main.
+
+    Inside ``with Shutdown() as stop:`` the loop checks ``stop.is_set()`` or calls
+    ``stop.wait(dt)``; the signal handlers are restored on exit.
+    """
+
+    def __init__(self, signals: Iterable[int] = (signal.SIGINT, signal.SIGTERM)):
+        self.event = threading.Event()
+        self.signum: int | None = None
+        self._signals = tuple(signals)
+        self._old: dict[int, Any] = {}
+
+    def _handle(self, signum, frame):
+        self.signum = signum
+        self.event.set()
+
+    def __enter__(self) -> "Shutdown":
+        if threading.current_thread() is threading.main_thread():
+            for s in self._signals:
+                self._old[s] = signal.signal(s, self._handle)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for s, h in self._old.items():
+            signal.signal(s, h)
+
+    def is_set(self) -> bool:
+        return self.event.is_set()
+
+    def set(self) -> None:
+        self.event.set()
+
+    def wait(self, timeout: float | None = None) -> bool:
+        return self.event.wait(timeout)
+
+
+class Mailbox:
+    """A thread-safe queue fed by Zenoh callbacks; the process loop drains it.
+
+    ``mailbox.callback`` is what you pass to ``declare_subscriber``: it only enqueues
+    ``(key, payload_bytes)``. Use ``get``/``drain`` in the main thread and decode there
+    with a :class:`Receiver`.
+    """
+
+    def __init__(self, maxsize: int = 0):
+        self.q: queue.Queue = queue.Queue(maxsize)
+        self.dropped = 0
+
+    def callback(self, sample: "zenoh.Sample") -> None:
+        try:
+            self.q.put_nowait((str(sample.key_expr), sample.payload.to_bytes(), sample.kind))
+        except queue.Full:
+            self.dropped += 1
+
+    def get(self, timeout: float | None = None):
+        """One (key, payload, kind) or None after ``timeout`` seconds."""
+        try:
+            return self.q.get(timeout=timeout)
+        except queue.Empty:
+            return None
+
+    def drain(self, limit: int = 100_000) -> list:
+        out = []
+        try:
+            while len(out) < limit:
+                out.append(self.q.get_nowait())
+        except queue.Empty:
+            pass
+        return out
+
+
+class Receiver:
+    """Decodes payloads for a process: invalid ones are dropped, counted and logged once per
+    key (sender), never raised."""
+
+    def __init__(self, logger: logging.Logger | None = None):
+        self.log = logger or log
+        self.invalid: Counter = Counter()
+        self._logged: set[str] = set()
+
+    def decode(self, key: str, payload: bytes, expected=None) -> Message | None:
+        try:
+            return decode(payload, expected)
+        except WireError as e:
+            self.invalid[key] += 1
+            if key not in self._logged:
+                self._logged.add(key)
+                self.log.warning("dropping invalid message on %s: %s (further ones from this "
+                                 "sender are counted, not logged)", key, e)
+            return None
+
+    @property
+    def invalid_total(self) -> int:
+        return sum(self.invalid.values())
+
+
+def publisher(session: zenoh.Session, key: str, *, block: bool = True, express: bool = False,
+              priority: "zenoh.Priority | None" = None):
+    """Declare a publisher: commands and lifecycle messages BLOCK; telemetry DROP."""
+    kw: dict[str, Any] = dict(
+        congestion_control=zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP,
+        express=express)
+    if priority is not None:
+        kw["priority"] = priority
+    return session.declare_publisher(key, **kw)
+
+
+def put(session: zenoh.Session, key: str, msg: Message, *, block: bool = True) -> None:
+    """One-off put of a message (commands use BLOCK)."""
+    session.put(key, msg.encode(), congestion_control=(
+        zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP))
+
+
+def setup_logging(level: str = "INFO", name: str = "swarmcover") -> logging.Logger:
+    logging.basicConfig(
+        level=getattr(logging, level.upper(), logging.INFO),
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s", datefmt="%H:%M:%S")
+    return logging.getLogger(name)
+
+
+def wait_for(pred, timeout: float, interval: float = 0.02) -> bool:
+    """Poll ``pred`` until true or ``timeout`` seconds pass (for start-up handshakes)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(interval)
+    return bool(pred())
+
+
+def keys_from_args(args: argparse.Namespace) -> Keys:
+    try:
+        return Keys(args.swarm)
+    except ValueError as e:
+        raise SystemExit(f"--swarm: {e}")
