@@ -62,11 +62,13 @@ def _check_int(v: Any, lo: int, hi: int) -> int:
 
 
 def f_float(lo: float = -1e9, hi: float = 1e9, default: float = 0.0):
-    return field(default=default, metadata={"check": lambda v: _check_float(v, lo, hi)})
+    return field(default=default, metadata={"check": lambda v: _check_float(v, lo, hi),
+                                             "kind": "float", "lo": lo, "hi": hi})
 
 
 def f_int(lo: int = -(2**62), hi: int = 2**62, default: int = 0):
-    return field(default=default, metadata={"check": lambda v: _check_int(v, lo, hi)})
+    return field(default=default, metadata={"check": lambda v: _check_int(v, lo, hi),
+                                             "kind": "int", "lo": lo, "hi": hi})
 
 
 def f_bool(default: bool = False):
@@ -74,7 +76,7 @@ def f_bool(default: bool = False):
         if not isinstance(v, bool):
             raise ValueError(f"expected a bool, got {type(v).__name__}")
         return v
-    return field(default=default, metadata={"check": check})
+    return field(default=default, metadata={"check": check, "kind": "bool"})
 
 
 def f_str(choices: tuple[str, ...] | None = None, maxlen: int = _MAX_STR, default: str = ""):
@@ -86,7 +88,8 @@ def f_str(choices: tuple[str, ...] | None = None, maxlen: int = _MAX_STR, defaul
         if choices is not None and v not in choices:
             raise ValueError(f"{v!r} not one of {', '.join(choices)}")
         return v
-    return field(default=default, metadata={"check": check})
+    return field(default=default, metadata={"check": check, "kind": "str", "choices": choices,
+                                            "maxlen": maxlen})
 
 
 def _list(v: Any) -> list:
@@ -106,7 +109,8 @@ def f_floats(lo: float = -1e9, hi: float = 1e9):
             except ValueError as e:
                 raise ValueError(f"[{k}]: {e}") from None
         return out
-    return field(default_factory=list, metadata={"check": check})
+    return field(default_factory=list, metadata={"check": check, "kind": "floats", "lo": lo,
+                                                 "hi": hi})
 
 
 def f_ints(lo: int = -(2**62), hi: int = 2**62):
@@ -118,7 +122,8 @@ def f_ints(lo: int = -(2**62), hi: int = 2**62):
             except ValueError as e:
                 raise ValueError(f"[{k}]: {e}") from None
         return out
-    return field(default_factory=list, metadata={"check": check})
+    return field(default_factory=list, metadata={"check": check, "kind": "ints", "lo": lo,
+                                                 "hi": hi})
 
 
 def f_bools():
@@ -128,7 +133,7 @@ def f_bools():
             if not isinstance(x, bool):
                 raise ValueError(f"[{k}]: expected a bool, got {type(x).__name__}")
         return out
-    return field(default_factory=list, metadata={"check": check})
+    return field(default_factory=list, metadata={"check": check, "kind": "bools"})
 
 
 def f_polys(lo: float = -1e6, hi: float = 1e6):
@@ -146,7 +151,8 @@ def f_polys(lo: float = -1e6, hi: float = 1e6):
                     raise ValueError(f"[{k}][{m}]: {e}") from None
             out[k] = p
         return out
-    return field(default_factory=list, metadata={"check": check})
+    return field(default_factory=list, metadata={"check": check, "kind": "polys", "lo": lo,
+                                                 "hi": hi})
 
 
 # --------------------------------------------------------------------------- registry
@@ -161,6 +167,7 @@ class Message:
     VERSION: ClassVar[int] = 1
     _FIELDS: ClassVar[tuple] = ()
     _SAME_LEN: ClassVar[tuple] = ()  # groups of list fields that must have equal lengths
+    _META: ClassVar[dict] = {}       # field name -> {"kind", bounds, choices} (schemas, tests)
 
     def encode(self) -> bytes:
         return encode(self)
@@ -186,6 +193,7 @@ def message(tag: str, version: int = 1, same_len: tuple = ()):
         cls.VERSION = version
         cls._SAME_LEN = same_len
         cls._FIELDS = tuple((f.name, f.metadata["check"]) for f in dataclasses.fields(cls))
+        cls._META = {f.name: dict(f.metadata) for f in dataclasses.fields(cls)}
         if tag in REGISTRY:
             raise RuntimeError(f"duplicate message tag {tag}")
         REGISTRY[tag] = cls

@@ -1,0 +1,110 @@
+"""Real processes over a real `swarmcover router` on a free loopback port."""
+from __future__ import annotations
+
+import json
+import re
+import signal
+import time
+
+from procs import SWARMCOVER, client_session, free_port, pids_with
+
+
+def test_two_processes_exchange_through_router(procs, router, zargs):
+    demo = procs.swarmcover("demo", *zargs, "--rate", "20")
+    demo.wait_line("READY demo")
+    echo = procs.swarmcover("topics", "echo", "demo", *zargs, "--count", "5", "--duration", "20")
+    assert echo.wait(30) == 0
+    msgs = [json.loads(line) for line in echo.lines if line.startswith("{")]
+    assert len(msgs) == 5
+    assert all(m["_t"] == "Demo" and m["_v"] == 1 for m in msgs)
+    seqs = [m["seq"] for m in msgs]
+    assert seqs == sorted(seqs) and len(set(seqs)) == 5
+
+
+def test_topics_list_hz_alive(procs, router, zargs):
+    demo = procs.swarmcover("demo", *zargs, "--rate", "10")
+    demo.wait_line("READY demo")
+    time.sleep(0.5)
+    lst = procs.swarmcover("topics", "list", *zargs, "--window", "2")
+    assert lst.wait(30) == 0
+    row = next(line for line in lst.lines if line.startswith("demo "))
+    _, typ, n, rate, senders = row.split()
+    assert typ == "Demo" and 10 <= int(n) <= 30 and 5.0 <= float(rate) <= 15.0 and senders == "1"
+
+    hz = procs.swarmcover("topics", "hz", "demo", *zargs, "--duration", "3.5")
+    assert hz.wait(30) == 0
+    rates = [float(m.group(1)) for line in hz.lines if (m := re.match(r"rate ([\d.]+) Hz", line))]
+    assert rates and all(6.0 <= r <= 14.0 for r in rates), hz.output()
+
+    alive = procs.swarmcover("topics", "alive", *zargs)
+    assert alive.wait(30) == 0
+    assert f"demo/{demo.pid}" in alive.lines, alive.output()
+
+    demo.signal(signal.SIGINT)
+    assert demo.wait(10) == 0
+    alive2 = procs.swarmcover("topics", "alive", *zargs)
+    assert alive2.wait(30) == 0
+    assert f"demo/{demo.pid}" not in alive2.lines
+
+
+def test_alive_watch_sees_departure(procs, router, zargs):
+    watch = procs.swarmcover("topics", "alive", *zargs, "--watch", "--duration", "15")
+    time.sleep(1.5)
+    demo = procs.swarmcover("demo", *zargs)
+    demo.wait_line("READY demo")
+    watch.wait_line(f"+ demo/{demo.pid}", timeout=10)
+    demo.signal(signal.SIGTERM)
+    assert demo.wait(10) == 0
+    watch.wait_line(f"- demo/{demo.pid}", timeout=10)
+
+
+def test_invalid_payload_echoed_as_error_not_crash(procs, router, zargs):
+    swarm = zargs[zargs.index("--swarm") + 1]
+    echo = procs.swarmcover("topics", "echo", "robot/*/sense", *zargs, "--count", "2",
+                            "--duration", "20")
+    time.sleep(1.5)
+    s = client_session(router, swarm)
+    try:
+        s.put(f"sc/{swarm}/robot/3/sense", b"\x81\xa2_t\xa5Sense")  # truncated map
+        s.put(f"sc/{swarm}/robot/3/sense", b"\xff\x00garbage")
+    finally:
+        s.close()
+    assert echo.wait(30) == 0
+    errs = [json.loads(line) for line in echo.lines if line.startswith("{")]
+    assert len(errs) == 2 and all("_error" in e for e in errs), echo.output()
+    assert "Sense._v" in errs[0]["_error"] or "Sense.robot" in errs[0]["_error"]
+
+
+def test_sigint_closes_cleanly_and_leaves_nothing(procs, router, zargs):
+    demo = procs.swarmcover("demo", *zargs)
+    demo.wait_line("READY demo")
+    echo = procs.swarmcover("topics", "echo", "**", *zargs)
+    time.sleep(1.0)
+    for p in (echo, demo):
+        p.signal(signal.SIGINT)
+    assert echo.wait(10) == 0 and demo.wait(10) == 0
+    assert not [p for p in pids_with(f"--swarm {zargs[-1]}")]
+
+
+def test_client_without_router_fails_fast_with_clear_error(procs):
+    dead = f"tcp/127.0.0.1:{free_port()}"
+    p = procs.swarmcover("topics", "list", "--connect", dead, "--connect-timeout", "1")
+    assert p.wait(30) == 2
+    assert "swarmcover router" in p.output() and dead in p.output()
+
+
+def test_bad_flags_name_the_flag(procs):
+    p = procs.swarmcover("demo", "--cfg", "no_colon_here")
+    assert p.wait(30) == 2
+    assert "--cfg" in p.output()
+    p = procs.swarmcover("demo", "--swarm", "bad/name")
+    assert p.wait(30) != 0
+    assert "--swarm" in p.output()
+
+
+def test_router_sigterm_exits_zero(procs):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    r = procs.start(SWARMCOVER + ["router", "--listen", endpoint])
+    r.wait_line("READY router")
+    r.signal(signal.SIGTERM)
+    assert r.wait(10) == 0
