@@ -1,0 +1,195 @@
+"""Agent parameters: one frozen dataclass, filled from the run config and CLI overrides.
+
+Sources, later ones win: the defaults below; the run config's ``rv``, ``[robots]`` (radius,
+kind, v_max, w_max), ``[sensing].n_touch`` and ``[world].dt``; its ``[agent]`` section (every
+field of :class:`AgentParams` except those owned by [robots], unknown keys rejected); then
+command-line flags. Angles in the config are in degrees where the name ends in ``_deg``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+ROBOT_KINDS = ("holonomic", "diffdrive")
+
+
+class ParamError(ValueError):
+    """A bad parameter; the message names the source, section, field and value."""
+
+
+@dataclass(frozen=True)
+class AgentParams:
+    # robot body and shared run values ([robots], rv, [sensing], [world])
+    kind: str = "holonomic"          # "holonomic" (never rotates) or "diffdrive"
+    v_max: float = 0.5               # m/s
+    w_max: float = 2.0               # rad/s (diffdrive)
+    radius: float = 0.06             # m, body radius
+    rv: float = 1.0                  # m, visibility radius
+    n_touch: int = 8                 # touch sectors; tau = pi / n_touch
+    dt: float = 0.05                 # s, nominal control tick (until measured from Sense.t)
+    # homing (spec 4.5)
+    g0: float = 0.3                  # gain saturation knee: K = v_max / max(|g|, g0)
+    arrive_deg: float = 1.5          # stop when every filtered bearing error < this ...
+    arrive_ticks: int = 10           # ... for this many consecutive ticks
+    error_alpha: float = 0.3         # low-pass weight of new bearing-error samples (stop rule)
+    lost_timeout_s: float = 2.0      # fail "lost landmarks" after this long with < 2 in view
+    # holding (station keeping on the recorded snapshot)
+    hold_window: int = 5             # ticks averaged into the bearing snapshot
+    hold_deadband_deg: float = 3.0   # re-home when >= 2 landmarks drift beyond this
+    hold_gate_deg: float = 25.0      # a landmark off by more than this has moved: re-record it
+    # open-loop motion, test drive, scale correction (spec 3.4(iv), 4.6)
+    deploy_speed_frac: float = 1.0   # open-loop deploy speed, fraction of v_max
+    test_drive_speed_frac: float = 0.5
+    scale_speed_frac: float = 0.5
+    scale_step_rv: float = 0.02      # back-up step of scale correction, fraction of rv
+    scale_max_rv: float = 1.5        # give up moving outward after this far (fraction of rv)
+    scale_margin_steps: int = 1      # extra back-up steps once every link is back
+    link_lost_ticks: int = 3         # a link counts as lost after this many ticks unseen
+    settle_ticks: int = 3            # ticks to wait still after each back-up step
+    blocked_s: float = 1.0           # open-loop motion blocked by a wall this long ends it
+    contact_clear_rv: float = 0.1    # a sticky contact clears after moving this far (x rv)
+    # differential drive (spec 4.8)
+    k_w: float = 1.5                 # 1/s
+    k_v: float = 1.0
+    align: str = "auto"              # frame alignment from mutual bearings: auto|on|off
+    # process
+    status_every: int = 4            # publish Status every this many Sense ticks
+
+    # ---------------------------------------------------------------- derived values
+    @property
+    def tau(self) -> float:
+        """Touch-direction resolution pi / n_touch (rad)."""
+        return math.pi / self.n_touch
+
+    @property
+    def arrive(self) -> float:
+        return math.radians(self.arrive_deg)
+
+    @property
+    def deadband(self) -> float:
+        return math.radians(self.hold_deadband_deg)
+
+    @property
+    def gate(self) -> float:
+        return math.radians(self.hold_gate_deg)
+
+    @property
+    def aligned(self) -> bool:
+        """Whether to estimate frame rotation from mutual bearings (rotating robots)."""
+        return self.align == "on" or (self.align == "auto" and self.kind == "diffdrive")
+
+    def replace(self, **kw: Any) -> "AgentParams":
+        return check(dataclasses.replace(self, **kw), "override")
+
+
+_FIELDS = {f.name: f for f in dataclasses.fields(AgentParams)}
+# owned by other sections of the run config, not settable from [agent]
+_NOT_IN_AGENT = {"kind", "v_max", "w_max", "radius", "rv", "n_touch", "dt"}
+_POSITIVE = {"v_max", "w_max", "rv", "dt", "g0", "arrive_deg", "lost_timeout_s",
+             "hold_deadband_deg", "hold_gate_deg", "deploy_speed_frac", "test_drive_speed_frac",
+             "scale_speed_frac", "scale_step_rv", "scale_max_rv", "blocked_s",
+             "contact_clear_rv", "k_w", "k_v", "error_alpha"}
+
+
+def _coerce(name: str, value: Any, where: str) -> Any:
+    typ = _FIELDS[name].type
+    bad = ParamError(f"{where}.{name} = {value!r}: expected {typ}")
+    if typ == "float":
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise bad
+        value = float(value)
+        if not math.isfinite(value):
+            raise ParamError(f"{where}.{name} = {value!r}: not finite")
+    elif typ == "int":
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise bad
+    elif typ == "str":
+        if not isinstance(value, str):
+            raise bad
+    return value
+
+
+def check(p: AgentParams, where: str = "params") -> AgentParams:
+    """Range checks; raises ParamError naming the field and value."""
+    for name in _POSITIVE:
+        if getattr(p, name) <= 0:
+            raise ParamError(f"{where}: {name} = {getattr(p, name)!r} must be > 0")
+    if p.kind not in ROBOT_KINDS:
+        raise ParamError(f"{where}: kind = {p.kind!r} not one of {', '.join(ROBOT_KINDS)}")
+    if p.align not in ("auto", "on", "off"):
+        raise ParamError(f"{where}: align = {p.align!r} not one of auto, on, off")
+    if p.error_alpha > 1:
+        raise ParamError(f"{where}: error_alpha = {p.error_alpha!r} must be <= 1")
+    for name in ("n_touch", "arrive_ticks", "hold_window", "link_lost_ticks", "settle_ticks",
+                 "status_every"):
+        if getattr(p, name) < 1:
+            raise ParamError(f"{where}: {name} = {getattr(p, name)!r} must be >= 1")
+    if p.scale_margin_steps < 0:
+        raise ParamError(f"{where}: scale_margin_steps = {p.scale_margin_steps!r} must be >= 0")
+    if p.radius < 0:
+        raise ParamError(f"{where}: radius = {p.radius!r} must be >= 0")
+    return p
+
+
+def from_config(cfg: Mapping[str, Any], source: str = "run config",
+                base: AgentParams | None = None) -> AgentParams:
+    """Parameters from a parsed run config (dict from TOML). ``source`` names the file (or
+    'world/info') in errors. Unknown keys in [agent] are rejected; other sections are only
+    read (their owners validate them)."""
+    kw: dict[str, Any] = {}
+
+    def take(section: Mapping[str, Any] | None, key: str, name: str, where: str):
+        if section is not None and key in section:
+            kw[name] = _coerce(name, section[key], where)
+
+    if not isinstance(cfg, Mapping):
+        raise ParamError(f"{source}: expected a TOML table")
+    take(cfg, "rv", "rv", source)
+    for sec_name, pairs in (("robots", (("radius", "radius"), ("kind", "kind"),
+                                        ("v_max", "v_max"), ("w_max", "w_max"))),
+                            ("sensing", (("n_touch", "n_touch"),)),
+                            ("world", (("dt", "dt"),))):
+        sec = cfg.get(sec_name)
+        if sec is None:
+            continue
+        if not isinstance(sec, Mapping):
+            raise ParamError(f"{source}: [{sec_name}] is not a table")
+        for key, name in pairs:
+            take(sec, key, name, f"{source} [{sec_name}]")
+    agent = cfg.get("agent")
+    if agent is not None:
+        if not isinstance(agent, Mapping):
+            raise ParamError(f"{source}: [agent] is not a table")
+        for key, value in agent.items():
+            if key not in _FIELDS or key in _NOT_IN_AGENT:
+                hint = " (set it in [robots])" if key in ("kind", "v_max", "w_max", "radius") else ""
+                raise ParamError(f"{source} [agent].{key} = {value!r}: unknown field{hint}")
+            kw[key] = _coerce(key, value, f"{source} [agent]")
+    p = dataclasses.replace(base or AgentParams(), **kw)
+    return check(p, source)
+
+
+def from_toml_text(text: str, source: str) -> AgentParams:
+    try:
+        cfg = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ParamError(f"{source}: not valid TOML: {e}") from None
+    return from_config(cfg, source)
+
+
+def parse_override(item: str, p: AgentParams) -> AgentParams:
+    """Apply one ``--param NAME=VALUE`` (VALUE parsed as a TOML value, bare words as strings)."""
+    if "=" not in item:
+        raise ParamError(f"--param {item!r}: expected NAME=VALUE")
+    name, raw = item.split("=", 1)
+    name = name.strip()
+    if name not in _FIELDS:
+        raise ParamError(f"--param {name} = {raw!r}: unknown field")
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw
+    return check(dataclasses.replace(p, **{name: _coerce(name, value, "--param")}), "--param")
