@@ -38,7 +38,8 @@ class AgentParams:
     lost_timeout_s: float = 2.0      # fail "lost landmarks" after this long with < 2 in view
     # holding (station keeping on the recorded snapshot)
     hold_window: int = 5             # ticks averaged into the bearing snapshot
-    hold_deadband_deg: float = 3.0   # re-home when >= 2 landmarks drift beyond this
+    hold_deadband_deg: float = 3.0   # re-home when a landmark drifts beyond this ...
+    hold_second_deg: float = 1.0     # ... and another beyond this (else that landmark moved)
     hold_gate_deg: float = 25.0      # a landmark off by more than this has moved: re-record it
     # open-loop motion, test drive, scale correction (spec 3.4(iv), 4.6)
     deploy_speed_frac: float = 1.0   # open-loop deploy speed, fraction of v_max
@@ -73,6 +74,10 @@ class AgentParams:
         return math.radians(self.hold_deadband_deg)
 
     @property
+    def second(self) -> float:
+        return math.radians(self.hold_second_deg)
+
+    @property
     def gate(self) -> float:
         return math.radians(self.hold_gate_deg)
 
@@ -89,7 +94,7 @@ _FIELDS = {f.name: f for f in dataclasses.fields(AgentParams)}
 # owned by other sections of the run config, not settable from [agent]
 _NOT_IN_AGENT = {"kind", "v_max", "w_max", "radius", "rv", "n_touch", "dt"}
 _POSITIVE = {"v_max", "w_max", "rv", "dt", "g0", "arrive_deg", "lost_timeout_s",
-             "hold_deadband_deg", "hold_gate_deg", "deploy_speed_frac", "test_drive_speed_frac",
+             "hold_deadband_deg", "hold_second_deg", "hold_gate_deg", "deploy_speed_frac", "test_drive_speed_frac",
              "scale_speed_frac", "scale_step_rv", "scale_max_rv", "blocked_s",
              "contact_clear_rv", "k_w", "k_v", "error_alpha"}
 

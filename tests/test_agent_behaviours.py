@@ -1,0 +1,253 @@
+"""Each behaviour of agents/behaviours.py in isolation, against synthetic bearing streams from
+the tiny kinematic simulator in test_agent_kinematics.py."""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from agents.behaviours import Behaviour
+from agents.params import AgentParams
+from bus.messages import Status, Task
+from test_agent_kinematics import KinSim, bearings_from, run
+
+PI = math.pi
+ME = 0
+# a triangle of static landmarks around the origin, spacing ~0.8
+LMS = {1: (0.8, 0.0, 0.0), 2: (-0.4, 0.69, 0.0), 3: (-0.4, -0.69, 0.0)}
+
+
+def world(me=(0.3, -0.2, 0.0), lms=LMS, **kw):
+    robots = {ME: me}
+    robots.update(lms)
+    kw.setdefault("rv", 1.5)
+    return KinSim(robots, **kw)
+
+
+def task(kind, tid=1, **kw):
+    return Task(task_id=tid, robot=ME, kind=kind, **kw).validate()
+
+
+def status_ok(beh):
+    """The status fields must make a valid Status message."""
+    Status(robot=ME, **beh.status()).validate()
+    return beh.status()
+
+
+def goto_task(sim, goal, lms=(1, 2, 3), tid=1, **kw):
+    return task("goto", tid, vertex=5, landmarks=list(lms),
+                bearings=bearings_from(sim, goal, lms), **kw)
+
+
+def test_starting_then_idle_with_zero_command():
+    beh = Behaviour(AgentParams(), ME)
+    assert beh.status()["state"] == "starting"
+    sim = world()
+    cmd = beh.step(sim.sense(ME))
+    assert (cmd.vx, cmd.vy, cmd.wz) == (0, 0, 0)
+    st = status_ok(beh)
+    assert st["state"] == "idle" and st["task_state"] == "none" and st["nbr_ids"] == [1, 2, 3]
+
+
+def test_goto_reaches_recorded_vertex_then_holds():
+    sim = world(noise_deg=0.5)
+    goal = (0.0, 0.0)
+    beh = Behaviour(AgentParams(), ME)
+    assert beh.on_task(goto_task(sim, goal))
+    states = set()
+
+    def done():
+        states.add(beh.status()["state"])
+        return beh.task_state == "done"
+    assert run(beh, sim, ME, 600, until=done)
+    assert "moving" in states
+    st = status_ok(beh)
+    assert st["state"] == "holding" and st["vertex"] == 5 and st["progress"] == 1.0
+    assert sim.dist(ME, goal) < 0.03
+    run(beh, sim, ME, 40)                      # holds still afterwards
+    assert sim.dist(ME, goal) < 0.03
+
+
+def test_hold_records_snapshot_undoes_bumps_and_ignores_a_moved_landmark():
+    sim = world(me=(0.0, 0.0, 0.0), noise_deg=0.5)
+    beh = Behaviour(AgentParams(), ME)
+    beh.on_task(task("hold", vertex=3))
+    run(beh, sim, ME, 3)
+    assert beh.task_state == "running" and beh.status()["state"] == "holding"
+    run(beh, sim, ME, 10)
+    st = status_ok(beh)
+    assert st["task_state"] == "done" and st["progress"] == 1.0
+    # reported bearings are the filtered snapshot: close to the truth despite noise
+    truth = dict(zip([1, 2, 3], bearings_from(sim, (0, 0), [1, 2, 3])))
+    for i, b in zip(st["nbr_ids"], st["nbr_bearings"]):
+        assert abs(b - truth[i]) < math.radians(1.0)
+    # a bump of 6 cm is undone
+    sim.pose[ME][0] += 0.06
+    sim.pose[ME][1] -= 0.03
+    run(beh, sim, ME, 200)
+    assert sim.dist(ME, (0, 0)) < 0.03
+    # a landmark is pushed far away (a push passing by): the robot does not follow it
+    sim.pose[2] = [-0.9, 0.1, 0.0]
+    run(beh, sim, ME, 100)
+    assert sim.dist(ME, (0, 0)) < 0.03
+    # ... and it re-records the landmark's new bearing
+    assert abs(beh.target[2] - bearings_from(sim, (0, 0), [2])[0]) < math.radians(2)
+    # a newly arrived neighbour is adopted into the snapshot
+    sim.pose[9] = [0.2, 0.5, 0.0]
+    run(beh, sim, ME, 20)
+    assert 9 in beh.target and 9 in status_ok(beh)["nbr_ids"]
+
+
+def test_deploy_with_two_landmarks_and_scale_correction():
+    # two references 0.5 apart; assumed geometry puts the target at an equilateral apex
+    lms = {1: (0.0, 0.0, 0.0), 2: (0.5, 0.0, 0.0)}
+    sim = world(me=(0.25, 0.1, 0.0), lms=lms, rv=1.0)
+    apex = (0.25, 0.5 * math.sqrt(3) / 2)
+    beh = Behaviour(AgentParams(), ME)
+    beh.on_task(task("deploy", vertex=7, landmarks=[1, 2], bearings=bearings_from(sim, apex, [1, 2]),
+                     scale_correct=True))
+    phases = []
+
+    def done():
+        if not phases or phases[-1] != beh.mode:
+            phases.append(beh.mode)
+        return beh.task_state != "running"
+    assert run(beh, sim, ME, 2000, until=done)
+    assert beh.task_state == "done", beh.reason
+    assert phases[:3] == ["home", "scale_out", "scale_back"]
+    assert beh.status()["state"] == "holding"
+    # ended just inside visibility of both references, on the bisector (bearings kept)
+    d1, d2 = sim.dist(ME, (0, 0)), sim.dist(ME, (0.5, 0))
+    assert max(d1, d2) <= 1.0 and max(d1, d2) > 1.0 - 0.1
+    assert abs(d1 - d2) < 0.05
+
+
+def test_deploy_open_loop_without_landmarks():
+    sim = world(me=(0.0, 0.0, 0.0), lms={})
+    beh = Behaviour(AgentParams(), ME)
+    beh.on_task(task("deploy", direction=0.5, distance=0.4))
+    assert run(beh, sim, ME, 200, until=lambda: beh.task_state != "running")
+    assert beh.task_state == "done"
+    x, y, _ = sim.pose[ME]
+    assert abs(math.hypot(x, y) - 0.4) < 0.004 and abs(math.atan2(y, x) - 0.5) < 1e-6
+
+
+def test_deploy_single_landmark_backs_up_when_link_lost():
+    sim = world(me=(0.0, 0.0, 0.0), lms={1: (-0.5, 0.0, 0.0)}, rv=1.0)
+    beh = Behaviour(AgentParams(), ME)
+    beh.on_task(task("deploy", landmarks=[1], bearings=[PI - 1e-9], direction=0.0,
+                     distance=1.0))
+    assert run(beh, sim, ME, 400, until=lambda: beh.task_state != "running")
+    assert beh.task_state == "done" and beh.reason == "link lost, backed up"
+    assert 1 in sim.sense(ME).ids
+    assert sim.dist(ME, (-0.5, 0)) > 0.9
+
+
+def test_test_drive_free_space_done():
+    sim = world(me=(0.0, 0.0, 0.0))
+    beh = Behaviour(AgentParams(), ME)
+    beh.on_task(task("test_drive", vertex=4, direction=PI / 2, distance=0.25,
+                     landmarks=[1, 2, 3], bearings=bearings_from(sim, (0, 0), [1, 2, 3])))
+    seen_state = []
+    assert run(beh, sim, ME, 200, until=lambda: seen_state.append(beh.state) or
+               beh.task_state != "running")
+    assert "test_driving" in seen_state
+    assert beh.task_state == "done" and not beh.contact
+    assert abs(sim.pose[ME][1] - 0.25) < 0.005
+
+
+@pytest.mark.parametrize("with_landmarks", [True, False])
+def test_test_drive_touch_returns_and_fails_with_contact(with_landmarks):
+    wall = ((-3, 0.15), (3, 0.15))
+    sim = world(me=(0.0, 0.0, 0.0), walls=[wall])
+    beh = Behaviour(AgentParams(), ME)
+    kw = dict(landmarks=[1, 2, 3], bearings=bearings_from(sim, (0, 0), [1, 2, 3])) \
+        if with_landmarks else {}
+    beh.on_task(task("test_drive", direction=PI / 2, distance=0.25, **kw))
+    assert run(beh, sim, ME, 400, until=lambda: beh.task_state != "running")
+    st = status_ok(beh)
+    assert st["task_state"] == "failed" and st["reason"] == "touch"
+    assert st["contact"] and abs(st["contact_bearing"] - PI / 2) < 1e-9
+    assert sim.dist(ME, (0, 0)) < 0.03
+    run(beh, sim, ME, 100)     # the contact stays sticky while holding, away from the wall
+    assert beh.status()["contact"]
+
+
+def test_goto_slides_along_a_wall():
+    """The goal lies beyond a wall: the robot slides along it instead of stopping."""
+    wall = ((-3, 0.3), (3, 0.3))
+    lms = {1: (1.2, -0.4, 0.0), 2: (0.4, -0.6, 0.0), 3: (-0.4, -0.4, 0.0)}
+    sim = world(me=(-0.3, 0.3 - 0.06, 0.0), lms=lms, walls=[wall], rv=3.0)
+    goal = (0.8, 0.5)
+    beh = Behaviour(AgentParams(), ME)
+    beh.on_task(goto_task(sim, goal, timeout_s=10.0))
+    touching = []
+    run(beh, sim, ME, 200, until=lambda: touching.append(bool(beh.obst)) or False)
+    x, y, _ = sim.pose[ME]
+    assert x > 0.6 and abs(y - 0.24) < 1e-6
+    assert sum(touching) > 20 and beh.status()["contact"]
+
+
+def test_goto_lost_landmarks_and_timeout():
+    sim = world()
+    beh = Behaviour(AgentParams(), ME)
+    beh.on_task(goto_task(sim, (0, 0)))
+    run(beh, sim, ME, 2)
+    for l in (2, 3):
+        del sim.pose[l]
+    assert run(beh, sim, ME, 100, until=lambda: beh.task_state != "running")
+    assert beh.task_state == "failed" and beh.reason == "lost landmarks"
+    assert beh.status()["state"] == "holding"
+    # an unreachable goal (bearings from a point the robot cannot settle at in time)
+    sim = world()
+    beh = Behaviour(AgentParams(), ME)
+    beh.on_task(goto_task(sim, (-2.0, 0.0), timeout_s=1.0))
+    assert run(beh, sim, ME, 100, until=lambda: beh.task_state != "running")
+    assert beh.task_state == "failed" and beh.reason == "timeout"
+    assert 0.95 <= beh.t - beh.t0 <= 1.2
+
+
+def test_leave_stops_and_idles_and_new_task_replaces_current():
+    sim = world()
+    beh = Behaviour(AgentParams(), ME)
+    beh.on_task(goto_task(sim, (-0.1, 0.1)))
+    run(beh, sim, ME, 5)
+    assert beh.state == "moving"
+    assert beh.on_task(task("leave", tid=2))
+    cmd = beh.step(sim.sense(ME))
+    assert (cmd.vx, cmd.vy) == (0, 0)
+    st = status_ok(beh)
+    assert st["state"] == "idle" and st["task_id"] == 2 and st["task_state"] == "done"
+    assert st["vertex"] == -1
+    assert not beh.on_task(task("leave", tid=2))          # duplicate ignored
+    assert not beh.on_task(Task(task_id=3, robot=ME + 1, kind="hold"))  # not ours
+    assert beh.rejected == 1
+
+
+def test_diffdrive_goto_with_ref_offsets():
+    sim = world(me=(0.3, -0.2, 2.5))
+    p = AgentParams(kind="diffdrive")
+    beh = Behaviour(p, ME)
+    lms = [1, 2, 3]
+    # reference frame = world (heading 0); landmarks have heading 0 -> offsets 0
+    beh.on_task(task("goto", landmarks=lms, bearings=bearings_from(sim, (0, 0), lms),
+                     ref_offsets=[0.0, 0.0, 0.0]))
+    assert run(beh, sim, ME, 1500, until=lambda: beh.task_state != "running")
+    assert beh.task_state == "done" and sim.dist(ME, (0, 0)) < 0.04
+    cmds = []
+    run(beh, sim, ME, 3, until=lambda: cmds.append(beh.cmd) or False)
+    assert all(c.vy == 0.0 for c in cmds)
+
+
+def test_diffdrive_contact_bearing_follows_rotation():
+    wall = ((-3, 0.06), (3, 0.06))
+    sim = world(me=(0.0, 0.0, 0.0), walls=[wall])
+    beh = Behaviour(AgentParams(kind="diffdrive"), ME)
+    beh.step(sim.sense(ME))
+    assert beh.status()["contact"] and abs(beh.status()["contact_bearing"] - PI / 2) < 1e-9
+    # leave the wall behind and rotate the body by +0.5 rad: the stored contact, in the
+    # new body frame, is at pi/2 - 0.5
+    sim.walls = []
+    sim.pose[ME][2] = 0.5
+    beh.step(sim.sense(ME))
+    assert abs(beh.status()["contact_bearing"] - (PI / 2 - 0.5)) < 1e-9
