@@ -1,0 +1,531 @@
+"""The shared run config: TOML (or a bare ROS map_server YAML) into frozen dataclasses.
+
+``load_config(path) -> RunConfig`` parses and validates the sections the world owns
+([map], [robots], [sensing], [world]) plus the top-level ``name`` and ``rv``; every other
+table ([agent], [coordinator], [run], [hwbridge], ...) is kept as a raw dict in
+``RunConfig.sections`` for its owner to validate. Unknown keys inside the world's sections
+are errors that name the file, the section, the field and the value.
+
+``to_toml(cfg)`` writes the resolved config (absolute ros_map path, every default filled
+in) as TOML text; this is what the world serves in ``WorldInfo.config``, and
+``loads_config(text)`` reads it back. Units: metres, seconds, radians unless a field's name
+says otherwise (``noise_deg``).
+"""
+from __future__ import annotations
+
+import copy
+import math
+import os
+import tomllib
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+ROBOT_KINDS = ("holonomic", "diffdrive")
+MODES = ("lockstep", "realtime")
+WORLD_SECTIONS = ("map", "robots", "sensing", "world")
+
+
+class ConfigError(ValueError):
+    """A bad run config. The message names file, section, field and value."""
+
+    def __init__(self, file: str, section: str, fieldname: str, value: Any, reason: str):
+        self.file, self.section, self.field, self.value = file, section, fieldname, value
+        where = f"[{section}] " if section else ""
+        shown = repr(value)
+        if len(shown) > 120:
+            shown = shown[:117] + "..."
+        super().__init__(f"{file}: {where}{fieldname} = {shown}: {reason}")
+
+
+# --------------------------------------------------------------------------- dataclasses
+
+@dataclass(frozen=True)
+class Obstacle:
+    """One obstacle of [map].obstacles (world frame, m).
+
+    type "rect": points = (min, max) corners; "circle": center, radius; "polygon": points.
+    """
+    type: str
+    points: tuple = ()
+    center: tuple = ()
+    radius: float = 0.0
+
+    def to_dict(self) -> dict:
+        if self.type == "rect":
+            return {"type": "rect", "min": list(self.points[0]), "max": list(self.points[1])}
+        if self.type == "circle":
+            return {"type": "circle", "center": list(self.center), "radius": self.radius}
+        return {"type": "polygon", "points": [list(p) for p in self.points]}
+
+
+@dataclass(frozen=True)
+class MapConfig:
+    """[map]: exactly one of ``boundary`` (outer polygon) or ``ros_map`` (absolute path of a
+    ROS map_server YAML). ROS tracing knobs: ``simplify`` (Douglas-Peucker tolerance, m;
+    0 = one map cell), ``min_hole_area`` (m^2; smaller non-free specks inside free space are
+    ignored; < 0 = 4 cells), ``max_vertices`` (cap on traced polygon vertices, tolerance
+    grows until met), ``max_cells`` (images larger than this are block-reduced, unknown and
+    occupied winning). ``circle_segments``: polygon sides used for circle obstacles."""
+    boundary: tuple | None = None
+    ros_map: str | None = None
+    obstacles: tuple = ()
+    sources: tuple = ()             # ((x, y, theta), ...); () = world picks one
+    simplify: float = 0.0
+    min_hole_area: float = -1.0
+    max_vertices: int = 20_000
+    max_cells: int = 16_000_000
+    circle_segments: int = 32
+
+
+@dataclass(frozen=True)
+class RobotsConfig:
+    """[robots]: body radius (m), kind, speed limits (m/s, rad/s); ``actuation_noise``:
+    relative Gaussian noise on commanded speeds of virtual robots (0 = exact)."""
+    radius: float = 0.06
+    kind: str = "holonomic"
+    v_max: float = 0.5
+    w_max: float = 2.0
+    actuation_noise: float = 0.0
+
+
+@dataclass(frozen=True)
+class SensingConfig:
+    """[sensing]: camera rate (Hz), bearing noise sigma (degrees), dropout probability per
+    sighting, whether robots block lines of sight, touch sectors, and the touch skin (m):
+    a contact is felt while the gap to a wall or robot surface is below it."""
+    rate_hz: float = 20.0
+    noise_deg: float = 0.5
+    dropout: float = 0.0
+    robots_occlude: bool = False
+    n_touch: int = 8
+    touch_skin: float = 0.015
+
+
+@dataclass(frozen=True)
+class SpawnSpec:
+    """One body created at start ([world].spawn): at source ``source``, or at ``pose``."""
+    robot: int
+    source: int = 0
+    kind: str | None = None        # None: [robots].kind
+    live: bool = False
+    pose: tuple | None = None      # (x, y, theta) world frame, overrides source
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """[world]: control tick dt (s), clock mode, real-time factor, seed, lockstep per-tick
+    timeout (wall s), stale-command age (sim s), odometry rate (Hz), physics substeps per
+    tick, and bodies to create at start."""
+    dt: float = 0.05
+    mode: str = "lockstep"
+    rtf: float = 1.0
+    seed: int = 0
+    tick_timeout_s: float = 2.0
+    stale_cmd_s: float = 0.5
+    pose_rate_hz: float = 5.0
+    substeps: int = 4
+    spawn: tuple = ()
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """A whole run config. ``sections``: raw dicts of the tables other components own."""
+    name: str = "run"
+    rv: float = 1.0
+    map: MapConfig = field(default_factory=MapConfig)
+    robots: RobotsConfig = field(default_factory=RobotsConfig)
+    sensing: SensingConfig = field(default_factory=SensingConfig)
+    world: WorldConfig = field(default_factory=WorldConfig)
+    sections: dict = field(default_factory=dict)
+    path: str = "<config>"
+    base_dir: str = "."
+
+    def section(self, name: str) -> dict:
+        """A raw section owned by another component ({} if absent)."""
+        return copy.deepcopy(self.sections.get(name, {}))
+
+
+# --------------------------------------------------------------------------- checks
+
+class _Ctx:
+    def __init__(self, file: str, section: str):
+        self.file, self.section = file, section
+
+    def err(self, name: str, value: Any, reason: str) -> ConfigError:
+        return ConfigError(self.file, self.section, name, value, reason)
+
+    def num(self, name, v, lo=-math.inf, hi=math.inf, lo_open=False) -> float:
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise self.err(name, v, "expected a number")
+        v = float(v)
+        if not math.isfinite(v):
+            raise self.err(name, v, "not finite")
+        if v < lo or v > hi or (lo_open and v == lo):
+            lo_s = f"({lo}" if lo_open else f"[{lo}"
+            raise self.err(name, v, f"outside {lo_s}, {hi}]")
+        return v
+
+    def int_(self, name, v, lo=-(2**62), hi=2**62) -> int:
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.err(name, v, "expected an integer")
+        if v < lo or v > hi:
+            raise self.err(name, v, f"outside [{lo}, {hi}]")
+        return v
+
+    def bool_(self, name, v) -> bool:
+        if not isinstance(v, bool):
+            raise self.err(name, v, "expected true or false")
+        return v
+
+    def choice(self, name, v, choices) -> str:
+        if not isinstance(v, str) or v not in choices:
+            raise self.err(name, v, f"expected one of {', '.join(choices)}")
+        return v
+
+    def point(self, name, v) -> tuple:
+        if not isinstance(v, (list, tuple)) or len(v) != 2:
+            raise self.err(name, v, "expected a point [x, y]")
+        return (self.num(name, v[0], -1e6, 1e6), self.num(name, v[1], -1e6, 1e6))
+
+    def polygon(self, name, v) -> tuple:
+        if not isinstance(v, (list, tuple)) or len(v) < 3:
+            raise self.err(name, v, "expected a polygon: a list of at least 3 points [x, y]")
+        pts = tuple(self.point(f"{name}[{k}]", p) for k, p in enumerate(v))
+        if abs(_shoelace(pts)) < 1e-12:
+            raise self.err(name, v, "polygon has zero area")
+        return pts
+
+    def table(self, name, v) -> dict:
+        if not isinstance(v, dict):
+            raise self.err(name, v, "expected a table")
+        return v
+
+
+def _shoelace(pts) -> float:
+    s = 0.0
+    n = len(pts)
+    for k in range(n):
+        x0, y0 = pts[k]
+        x1, y1 = pts[(k + 1) % n]
+        s += x0 * y1 - x1 * y0
+    return 0.5 * s
+
+
+def _check_keys(ctx: _Ctx, d: dict, allowed) -> None:
+    for k in d:
+        if k not in allowed:
+            raise ctx.err(k, d[k], f"unknown field (known: {', '.join(sorted(allowed))})")
+
+
+# --------------------------------------------------------------------------- sections
+
+def _parse_map(d: dict, file: str, base_dir: str) -> MapConfig:
+    ctx = _Ctx(file, "map")
+    allowed = {f.name for f in fields(MapConfig)}
+    _check_keys(ctx, d, allowed)
+    boundary = ros_map = None
+    if "boundary" in d and "ros_map" in d:
+        raise ctx.err("ros_map", d["ros_map"], "give either boundary or ros_map, not both")
+    if "boundary" in d:
+        boundary = ctx.polygon("boundary", d["boundary"])
+    elif "ros_map" in d:
+        v = d["ros_map"]
+        if not isinstance(v, str) or not v:
+            raise ctx.err("ros_map", v, "expected a path to a ROS map_server YAML")
+        p = Path(v)
+        if not p.is_absolute():
+            p = Path(base_dir) / p
+        p = p.resolve()
+        if not p.is_file():
+            raise ctx.err("ros_map", v, f"file not found ({p})")
+        ros_map = str(p)
+    else:
+        raise ctx.err("boundary", None, "missing: give boundary (a polygon) or ros_map")
+    obstacles = []
+    obs = d.get("obstacles", [])
+    if not isinstance(obs, list):
+        raise ctx.err("obstacles", obs, "expected a list of tables")
+    for k, o in enumerate(obs):
+        name = f"obstacles[{k}]"
+        ctx.table(name, o)
+        t = o.get("type")
+        if t == "rect":
+            _check_keys(ctx, o, {"type", "min", "max"})
+            lo = ctx.point(f"{name}.min", o.get("min"))
+            hi = ctx.point(f"{name}.max", o.get("max"))
+            if not (hi[0] > lo[0] and hi[1] > lo[1]):
+                raise ctx.err(f"{name}.max", o.get("max"), "must exceed min in x and y")
+            obstacles.append(Obstacle("rect", points=(lo, hi)))
+        elif t == "circle":
+            _check_keys(ctx, o, {"type", "center", "radius"})
+            c = ctx.point(f"{name}.center", o.get("center"))
+            r = ctx.num(f"{name}.radius", o.get("radius"), 0.0, 1e6, lo_open=True)
+            obstacles.append(Obstacle("circle", center=c, radius=r))
+        elif t == "polygon":
+            _check_keys(ctx, o, {"type", "points"})
+            obstacles.append(Obstacle("polygon", points=ctx.polygon(f"{name}.points",
+                                                                    o.get("points"))))
+        else:
+            raise ctx.err(f"{name}.type", t, "expected rect, circle or polygon")
+    sources = []
+    src = d.get("sources", [])
+    if not isinstance(src, list):
+        raise ctx.err("sources", src, "expected a list of tables {x, y, theta}")
+    for k, s in enumerate(src):
+        name = f"sources[{k}]"
+        ctx.table(name, s)
+        _check_keys(ctx, s, {"x", "y", "theta"})
+        if "x" not in s or "y" not in s:
+            raise ctx.err(name, s, "needs x and y")
+        sources.append((ctx.num(f"{name}.x", s["x"], -1e6, 1e6),
+                        ctx.num(f"{name}.y", s["y"], -1e6, 1e6),
+                        ctx.num(f"{name}.theta", s.get("theta", 0.0), -math.pi, math.pi)))
+    return MapConfig(
+        boundary=boundary, ros_map=ros_map, obstacles=tuple(obstacles), sources=tuple(sources),
+        simplify=ctx.num("simplify", d.get("simplify", 0.0), 0.0, 1e3),
+        min_hole_area=ctx.num("min_hole_area", d.get("min_hole_area", -1.0), -1.0, 1e6),
+        max_vertices=ctx.int_("max_vertices", d.get("max_vertices", 20_000), 16, 10_000_000),
+        max_cells=ctx.int_("max_cells", d.get("max_cells", 16_000_000), 1_000, 10**9),
+        circle_segments=ctx.int_("circle_segments", d.get("circle_segments", 32), 6, 1024))
+
+
+def _parse_robots(d: dict, file: str) -> RobotsConfig:
+    ctx = _Ctx(file, "robots")
+    _check_keys(ctx, d, {f.name for f in fields(RobotsConfig)})
+    dflt = RobotsConfig()
+    return RobotsConfig(
+        radius=ctx.num("radius", d.get("radius", dflt.radius), 0.0, 100.0, lo_open=True),
+        kind=ctx.choice("kind", d.get("kind", dflt.kind), ROBOT_KINDS),
+        v_max=ctx.num("v_max", d.get("v_max", dflt.v_max), 0.0, 100.0, lo_open=True),
+        w_max=ctx.num("w_max", d.get("w_max", dflt.w_max), 0.0, 100.0, lo_open=True),
+        actuation_noise=ctx.num("actuation_noise", d.get("actuation_noise", 0.0), 0.0, 1.0))
+
+
+def _parse_sensing(d: dict, file: str) -> SensingConfig:
+    ctx = _Ctx(file, "sensing")
+    _check_keys(ctx, d, {f.name for f in fields(SensingConfig)})
+    dflt = SensingConfig()
+    return SensingConfig(
+        rate_hz=ctx.num("rate_hz", d.get("rate_hz", dflt.rate_hz), 0.0, 1e4, lo_open=True),
+        noise_deg=ctx.num("noise_deg", d.get("noise_deg", dflt.noise_deg), 0.0, 90.0),
+        dropout=ctx.num("dropout", d.get("dropout", dflt.dropout), 0.0, 1.0),
+        robots_occlude=ctx.bool_("robots_occlude", d.get("robots_occlude", False)),
+        n_touch=ctx.int_("n_touch", d.get("n_touch", dflt.n_touch), 1, 360),
+        touch_skin=ctx.num("touch_skin", d.get("touch_skin", dflt.touch_skin), 0.0, 10.0))
+
+
+def _parse_world(d: dict, file: str) -> WorldConfig:
+    ctx = _Ctx(file, "world")
+    _check_keys(ctx, d, {f.name for f in fields(WorldConfig)})
+    dflt = WorldConfig()
+    spawn = []
+    sp = d.get("spawn", [])
+    if not isinstance(sp, list):
+        raise ctx.err("spawn", sp, "expected a list of tables {robot, source, kind, live, pose}")
+    seen = set()
+    for k, s in enumerate(sp):
+        name = f"spawn[{k}]"
+        ctx.table(name, s)
+        _check_keys(ctx, s, {"robot", "source", "kind", "live", "pose"})
+        if "robot" not in s:
+            raise ctx.err(name, s, "needs robot (an id)")
+        rid = ctx.int_(f"{name}.robot", s["robot"], 0, 2**62)
+        if rid in seen:
+            raise ctx.err(f"{name}.robot", rid, "duplicate robot id")
+        seen.add(rid)
+        pose = None
+        if "pose" in s:
+            p = s["pose"]
+            if not isinstance(p, list) or len(p) not in (2, 3):
+                raise ctx.err(f"{name}.pose", p, "expected [x, y] or [x, y, theta]")
+            pose = tuple(ctx.num(f"{name}.pose", v, -1e6, 1e6) for v in p)
+            if len(pose) == 2:
+                pose = pose + (0.0,)
+        spawn.append(SpawnSpec(
+            robot=rid, source=ctx.int_(f"{name}.source", s.get("source", 0), 0, 1000),
+            kind=ctx.choice(f"{name}.kind", s["kind"], ROBOT_KINDS) if "kind" in s else None,
+            live=ctx.bool_(f"{name}.live", s.get("live", False)), pose=pose))
+    return WorldConfig(
+        dt=ctx.num("dt", d.get("dt", dflt.dt), 0.0, 10.0, lo_open=True),
+        mode=ctx.choice("mode", d.get("mode", dflt.mode), MODES),
+        rtf=ctx.num("rtf", d.get("rtf", dflt.rtf), 0.0, 1e4, lo_open=True),
+        seed=ctx.int_("seed", d.get("seed", dflt.seed), 0, 2**63 - 1),
+        tick_timeout_s=ctx.num("tick_timeout_s", d.get("tick_timeout_s", dflt.tick_timeout_s),
+                               0.0, 3600.0, lo_open=True),
+        stale_cmd_s=ctx.num("stale_cmd_s", d.get("stale_cmd_s", dflt.stale_cmd_s), 0.0, 1e6,
+                            lo_open=True),
+        pose_rate_hz=ctx.num("pose_rate_hz", d.get("pose_rate_hz", dflt.pose_rate_hz), 0.0,
+                             1e4),
+        substeps=ctx.int_("substeps", d.get("substeps", dflt.substeps), 1, 100),
+        spawn=tuple(spawn))
+
+
+# --------------------------------------------------------------------------- loading
+
+def parse_config(d: dict, path: str = "<config>", base_dir: str = ".") -> RunConfig:
+    """Validate a config dict (as from tomllib). Relative paths resolve against base_dir."""
+    ctx = _Ctx(path, "")
+    if not isinstance(d, dict):
+        raise ctx.err("<top>", d, "expected a table")
+    sections = {}
+    for k, v in d.items():
+        if k in ("name", "rv") or k in WORLD_SECTIONS:
+            continue
+        if not isinstance(v, dict):
+            raise ctx.err(k, v, "unknown top-level field (known: name, rv, and tables)")
+        sections[k] = copy.deepcopy(v)
+    for s in WORLD_SECTIONS:
+        if s in d and not isinstance(d[s], dict):
+            raise ctx.err(s, d[s], "expected a table")
+    name = d.get("name", Path(path).stem if path and not path.startswith("<") else "run")
+    if not isinstance(name, str) or not name or len(name) > 200:
+        raise ctx.err("name", name, "expected a non-empty string (at most 200 characters)")
+    rv = ctx.num("rv", d.get("rv", 1.0), 0.0, 1e6, lo_open=True)
+    if "map" not in d:
+        raise ConfigError(path, "map", "<section>", None, "missing [map] section")
+    cfg = RunConfig(
+        name=name, rv=rv,
+        map=_parse_map(d["map"], path, base_dir),
+        robots=_parse_robots(d.get("robots", {}), path),
+        sensing=_parse_sensing(d.get("sensing", {}), path),
+        world=_parse_world(d.get("world", {}), path),
+        sections=sections, path=path, base_dir=base_dir)
+    for k, s in enumerate(cfg.world.spawn):
+        if s.pose is None and cfg.map.sources and s.source >= len(cfg.map.sources):
+            raise ConfigError(path, "world", f"spawn[{k}].source", s.source,
+                              f"only {len(cfg.map.sources)} source(s) in [map].sources")
+    return cfg
+
+
+def load_config(path: str | os.PathLike) -> RunConfig:
+    """Load a run config TOML, or a bare ROS map_server YAML (defaults built around it)."""
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(str(path), "", "<file>", str(path), "file not found")
+    if p.suffix.lower() in (".yaml", ".yml"):
+        return parse_config({"name": p.stem, "map": {"ros_map": str(p.resolve())}},
+                            str(p), str(p.resolve().parent))
+    try:
+        d = tomllib.loads(p.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise ConfigError(str(path), "", "<toml>", None, f"not valid TOML: {e}") from None
+    return parse_config(d, str(p), str(p.resolve().parent))
+
+
+def loads_config(text: str, path: str = "<text>", base_dir: str = ".") -> RunConfig:
+    """Parse TOML text, e.g. ``WorldInfo.config`` served by the world."""
+    try:
+        d = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(path, "", "<toml>", None, f"not valid TOML: {e}") from None
+    return parse_config(d, path, base_dir)
+
+
+def with_sources(cfg: RunConfig, sources) -> RunConfig:
+    """A copy of cfg with [map].sources replaced (e.g. by the world's automatic pick)."""
+    src = tuple((float(x), float(y), float(t)) for x, y, t in sources)
+    return replace(cfg, map=replace(cfg.map, sources=src))
+
+
+# --------------------------------------------------------------------------- TOML out
+
+def to_dict(cfg: RunConfig) -> dict:
+    """The resolved config as a plain dict (every default filled in)."""
+    m = cfg.map
+    md: dict[str, Any] = {}
+    if m.boundary is not None:
+        md["boundary"] = [list(p) for p in m.boundary]
+    else:
+        md["ros_map"] = m.ros_map
+    md["obstacles"] = [o.to_dict() for o in m.obstacles]
+    md["sources"] = [{"x": x, "y": y, "theta": t} for x, y, t in m.sources]
+    for k in ("simplify", "min_hole_area", "max_vertices", "max_cells", "circle_segments"):
+        md[k] = getattr(m, k)
+    wd = {f.name: getattr(cfg.world, f.name) for f in fields(WorldConfig) if f.name != "spawn"}
+    spawn = []
+    for s in cfg.world.spawn:
+        e: dict[str, Any] = {"robot": s.robot, "source": s.source, "live": s.live}
+        if s.kind is not None:
+            e["kind"] = s.kind
+        if s.pose is not None:
+            e["pose"] = list(s.pose)
+        spawn.append(e)
+    wd["spawn"] = spawn
+    out: dict[str, Any] = {"name": cfg.name, "rv": cfg.rv, "map": md,
+                           "robots": {f.name: getattr(cfg.robots, f.name)
+                                      for f in fields(RobotsConfig)},
+                           "sensing": {f.name: getattr(cfg.sensing, f.name)
+                                       for f in fields(SensingConfig)},
+                           "world": wd}
+    for k, v in cfg.sections.items():
+        out[k] = copy.deepcopy(v)
+    return out
+
+
+def to_toml(cfg: RunConfig) -> str:
+    """The resolved config as TOML text (round-trips through loads_config)."""
+    return dumps_toml(to_dict(cfg))
+
+
+def _toml_key(k: str) -> str:
+    if k and all(c.isalnum() or c in "_-" for c in k):
+        return k
+    return _toml_value(str(k))
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "nan"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return repr(v)
+    if isinstance(v, str):
+        out = ['"']
+        for c in v:
+            if c == '"':
+                out.append('\\"')
+            elif c == "\\":
+                out.append("\\\\")
+            elif c == "\n":
+                out.append("\\n")
+            elif c == "\t":
+                out.append("\\t")
+            elif ord(c) < 0x20 or ord(c) == 0x7F:
+                out.append(f"\\u{ord(c):04x}")
+            else:
+                out.append(c)
+        out.append('"')
+        return "".join(out)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{_toml_key(k)} = {_toml_value(x)}" for k, x in v.items()) + "}"
+    if v is None:
+        raise ValueError("TOML has no null")
+    if hasattr(v, "isoformat"):
+        return v.isoformat()
+    raise ValueError(f"cannot write {type(v).__name__} as TOML")
+
+
+def dumps_toml(d: dict, _prefix: str = "") -> str:
+    """A small TOML writer: scalars and arrays inline, nested tables as [a.b] headers."""
+    lines, tables = [], []
+    for k, v in d.items():
+        if v is None:
+            continue
+        if isinstance(v, dict):
+            tables.append((k, v))
+        else:
+            lines.append(f"{_toml_key(k)} = {_toml_value(v)}")
+    out = "\n".join(lines)
+    for k, v in tables:
+        name = f"{_prefix}.{_toml_key(k)}" if _prefix else _toml_key(k)
+        body = dumps_toml(v, name)
+        out += ("\n\n" if out else "") + f"[{name}]" + ("\n" + body if body else "")
+    return out + ("\n" if not _prefix else "")
