@@ -1,0 +1,442 @@
+"""Record the swarm's key space to MCAP: ``swarmcover record [KEYEXPR] -o FILE.mcap``.
+
+What is written (one MCAP file, zstd chunks, with summary and indexes):
+  * every sample PUT on ``KEYEXPR`` (default ``sc/<swarm>/**``): channel = the full key,
+    message encoding ``msgpack``, data = the raw payload bytes as they travelled; one schema
+    per message tag (``jsonschema`` encoding, generated from bus/messages.py), chosen from
+    the key's topic (bus.keys.message_for_key) or else from the payload's ``_t``;
+  * liveliness tokens under the key space: channel = the token's key, message encoding
+    ``liveliness``, data ``b"put"`` / ``b"delete"`` (token appeared / went);
+  * ``world/info``: queried once at start (and again when a world's liveliness token
+    appears while it is still missing); the reply is written on its key with message
+    encoding ``msgpack`` and channel metadata ``{"zenoh": "query_reply"}``.
+
+Times: ``log_time`` is the wall clock (ns since the Unix epoch) at receipt in this process;
+``publish_time`` is the sample's Zenoh timestamp when the publisher set one, else log_time.
+
+:class:`Recorder` is the importable part (``run --record`` uses it on its own session);
+:class:`McapSink` writes messages to a file without Zenoh (tests, converters).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import logging
+import os
+import queue
+import sys
+import threading
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Iterable
+
+import msgpack
+from mcap.writer import CompressionType, Writer
+
+from bus import messages as m
+from bus.keys import ROOT, message_for_key
+
+log = logging.getLogger("swarmcover.record")
+
+MSG_ENCODING = "msgpack"
+LIVELINESS_ENCODING = "liveliness"
+SCHEMA_ENCODING = "jsonschema"
+KIND_PUT, KIND_LIVELINESS, KIND_QUERY_REPLY = "put", "liveliness", "query_reply"
+PROFILE = "swarmcover"
+
+
+# --------------------------------------------------------------------------- schemas
+
+_NUM_KINDS = {"f_float": "number", "f_int": "integer"}
+
+
+def _field_schema(f: dataclasses.Field) -> dict:
+    """JSON-schema of one message field, read from its checker (bus.messages f_* helpers)."""
+    check = f.metadata.get("check")
+    maker = check.__qualname__.split(".")[0] if check is not None else ""
+    env = {}
+    if check is not None and check.__closure__:
+        env = {n: c.cell_contents for n, c in zip(check.__code__.co_freevars, check.__closure__)}
+    rng = {k: env[v] for k, v in (("minimum", "lo"), ("maximum", "hi")) if v in env}
+    default = None if f.default is dataclasses.MISSING else f.default
+    if maker in _NUM_KINDS:
+        out = {"type": _NUM_KINDS[maker], **rng}
+    elif maker == "f_bool":
+        out = {"type": "boolean"}
+    elif maker == "f_str":
+        out = {"type": "string", "maxLength": env.get("maxlen")}
+        if env.get("choices"):
+            out["enum"] = list(env["choices"])
+    elif maker in ("f_floats", "f_ints"):
+        item = {"type": "number" if maker == "f_floats" else "integer", **rng}
+        out = {"type": "array", "items": item}
+    elif maker == "f_bools":
+        out = {"type": "array", "items": {"type": "boolean"}}
+    elif maker == "f_polys":
+        out = {"type": "array", "description": "polygons, each a flat [x0, y0, x1, y1, ...]",
+               "items": {"type": "array", "items": {"type": "number", **rng}}}
+    else:  # a checker this module does not know: still name the Python type
+        out = {"type": "object", "description": f"python type {f.type}"}
+    if default is not None:
+        out["default"] = default
+    return {k: v for k, v in out.items() if v is not None}
+
+
+def schema_for(cls: type[m.Message]) -> dict:
+    """A JSON-schema description of message class ``cls`` as it is on the wire (msgpack map)."""
+    fields = dataclasses.fields(cls)
+    props = {"_t": {"const": cls.TAG}, "_v": {"const": cls.VERSION}}
+    props.update({f.name: _field_schema(f) for f in fields})
+    doc = " ".join((cls.__doc__ or "").split())
+    out = {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": cls.TAG,
+           "description": doc, "type": "object", "properties": props,
+           "required": list(props), "additionalProperties": False}
+    if cls._SAME_LEN:
+        out["x-same-length"] = [list(g) for g in cls._SAME_LEN]
+    return out
+
+
+def schema_bytes(cls: type[m.Message]) -> bytes:
+    return json.dumps(schema_for(cls), separators=(",", ":"), sort_keys=False).encode()
+
+
+def _peek_tag(payload: bytes) -> str | None:
+    """The ``_t`` of a msgpack map payload, or None (no validation)."""
+    try:
+        d = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+    except Exception:
+        return None
+    t = d.get("_t") if isinstance(d, dict) else None
+    return t if isinstance(t, str) else None
+
+
+# --------------------------------------------------------------------------- sink
+
+class McapSink:
+    """Writes swarmcover messages to an MCAP file; registers schemas and channels lazily.
+
+    Not thread-safe: one writer thread at a time.
+    """
+
+    def __init__(self, path: str | os.PathLike, *, metadata: dict[str, str] | None = None):
+        self.path = Path(path)
+        if self.path.parent and not self.path.parent.exists():
+            raise FileNotFoundError(f"output {self.path}: directory {self.path.parent} does not exist")
+        self._f = open(self.path, "wb")
+        self._w = Writer(self._f, compression=CompressionType.ZSTD)
+        self._w.start(profile=PROFILE, library=f"swarmcover-record/mcap")
+        if metadata:
+            self._w.add_metadata("swarmcover", {str(k): str(v) for k, v in metadata.items()})
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[tuple[str, str], int] = {}
+        self._seq: Counter = Counter()
+        self.counts: Counter = Counter()   # messages per key
+        self.bytes = 0
+        self.closed = False
+
+    def _schema_id(self, tag: str | None) -> int:
+        if tag is None or tag not in m.REGISTRY:
+            return 0
+        sid = self._schemas.get(tag)
+        if sid is None:
+            sid = self._w.register_schema(tag, SCHEMA_ENCODING, schema_bytes(m.REGISTRY[tag]))
+            self._schemas[tag] = sid
+        return sid
+
+    def _channel(self, key: str, kind: str, payload: bytes) -> int:
+        cid = self._channels.get((key, kind))
+        if cid is None:
+            if kind == KIND_LIVELINESS:
+                cid = self._w.register_channel(key, LIVELINESS_ENCODING, 0, {"zenoh": kind})
+            else:
+                cls = message_for_key(key)
+                tag = cls.TAG if cls is not None else _peek_tag(payload)
+                cid = self._w.register_channel(key, MSG_ENCODING, self._schema_id(tag),
+                                               {"zenoh": kind})
+            self._channels[(key, kind)] = cid
+        return cid
+
+    def write(self, key: str, payload: bytes, log_time_ns: int, *, kind: str = KIND_PUT,
+              publish_time_ns: int | None = None) -> None:
+        """Write one message. kind: "put", "query_reply" or "liveliness" (payload b"put"/b"delete")."""
+        if kind not in (KIND_PUT, KIND_LIVELINESS, KIND_QUERY_REPLY):
+            raise ValueError(f"McapSink.write kind={kind!r}: expected put, liveliness or query_reply")
+        cid = self._channel(key, kind, payload)
+        self._seq[cid] += 1
+        self._w.add_message(cid, log_time=int(log_time_ns), data=bytes(payload),
+                            publish_time=int(publish_time_ns or log_time_ns),
+                            sequence=self._seq[cid])
+        self.counts[key] += 1
+        self.bytes += len(payload)
+
+    def write_message(self, key: str, msg: m.Message, log_time_ns: int, **kw) -> None:
+        """Encode and write a message object (for tests and converters)."""
+        self.write(key, msg.encode(), log_time_ns, **kw)
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        try:
+            self._w.finish()
+        finally:
+            self._f.close()
+
+    def __enter__(self) -> "McapSink":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+# --------------------------------------------------------------------------- recorder
+
+def _zenoh():
+    import zenoh  # imported lazily: McapSink users need no Zenoh
+    return zenoh
+
+
+class Recorder:
+    """Records ``keyexpr`` from an open Zenoh session into an MCAP file.
+
+    session: an open session (not closed by the recorder); keyexpr: e.g. ``sc/run1/**``;
+    path: output file; exclude: key expressions not to record (e.g. ``sc/run1/robot/*/sense``);
+    world_info_key: key of the world/info queryable (default: derived from a ``.../**``
+    keyexpr, None to skip); metadata: extra MCAP metadata strings.
+
+    ``start()`` declares the subscribers and starts a writer thread; Zenoh callbacks only
+    stamp and enqueue. ``stop()`` undeclares, writes what is queued and finishes the file;
+    it returns the counts. Usable as a context manager.
+    """
+
+    def __init__(self, session, keyexpr: str, path: str | os.PathLike, *,
+                 exclude: Iterable[str] = (), world_info_key: str | None = "auto",
+                 metadata: dict[str, str] | None = None, query_timeout_s: float = 2.0):
+        zenoh = _zenoh()
+        self.session = session
+        self._PUT = zenoh.SampleKind.PUT
+        try:
+            self.keyexpr = str(zenoh.KeyExpr(keyexpr))
+        except Exception as e:
+            raise ValueError(f"key expression {keyexpr!r}: {e}") from None
+        self.exclude = []
+        for pat in exclude:
+            try:
+                self.exclude.append(zenoh.KeyExpr(pat))
+            except Exception as e:
+                raise ValueError(f"exclude pattern {pat!r}: {e}") from None
+        if world_info_key == "auto":
+            world_info_key = (self.keyexpr[:-3] + "/world/info"
+                              if self.keyexpr.endswith("/**") and "*" not in self.keyexpr[:-3]
+                              else None)
+        self.world_info_key = world_info_key
+        self.path = Path(path)
+        self.query_timeout_s = query_timeout_s
+        self._meta = {"keyexpr": self.keyexpr, "started_unix_ns": str(time.time_ns()),
+                      "exclude": ",".join(str(e) for e in self.exclude), **(metadata or {})}
+        self._q: queue.SimpleQueue = queue.SimpleQueue()
+        self._sink: McapSink | None = None
+        self._subs: list = []
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._excluded_cache: dict[str, bool] = {}
+        self._want_info = threading.Event()
+        self.have_world_info = False
+        self.deletes_skipped = 0
+        self.errors = 0
+
+    # -- callbacks: stamp and enqueue only
+    def _on_sample(self, sample) -> None:
+        kind = KIND_PUT if sample.kind == self._PUT else "delete"
+        ts = sample.timestamp
+        pub = None
+        if ts is not None:
+            try:
+                pub = int(ts.get_time().timestamp() * 1e9)
+            except Exception:
+                pub = None
+        self._q.put((time.time_ns(), str(sample.key_expr), kind,
+                     sample.payload.to_bytes() if kind == KIND_PUT else b"", pub))
+
+    def _on_token(self, sample) -> None:
+        put = sample.kind == self._PUT
+        self._q.put((time.time_ns(), str(sample.key_expr), KIND_LIVELINESS,
+                     b"put" if put else b"delete", None))
+
+    # -- life cycle
+    def start(self) -> "Recorder":
+        if self._thread is not None:
+            raise RuntimeError("Recorder.start: already started")
+        self._sink = McapSink(self.path, metadata=self._meta)
+        self._subs.append(self.session.declare_subscriber(self.keyexpr, self._on_sample))
+        self._subs.append(self.session.liveliness().declare_subscriber(
+            self.keyexpr, self._on_token, history=True))
+        if self.world_info_key:
+            self._want_info.set()
+        self._thread = threading.Thread(target=self._run, name="recorder-writer", daemon=True)
+        self._thread.start()
+        return self
+
+    def _excluded(self, key: str) -> bool:
+        hit = self._excluded_cache.get(key)
+        if hit is None:
+            hit = any(p.intersects(key) for p in self.exclude)
+            self._excluded_cache[key] = hit
+        return hit
+
+    def _query_world_info(self) -> None:
+        self._want_info.clear()
+        try:
+            replies = self.session.get(self.world_info_key, timeout=self.query_timeout_s)
+            for reply in replies:
+                s = reply.ok
+                if s is None:
+                    continue
+                key = str(s.key_expr)
+                self._write(time.time_ns(), key, KIND_QUERY_REPLY, s.payload.to_bytes(), None)
+                self.have_world_info = True
+        except Exception as e:  # a failed query is logged, never fatal to recording
+            self.errors += 1
+            log.warning("world/info query on %s failed: %s", self.world_info_key, e)
+
+    def _write(self, t, key, kind, payload, pub) -> None:
+        if kind == "delete":
+            self.deletes_skipped += 1
+            return
+        if self._excluded(key):
+            return
+        try:
+            self._sink.write(key, payload, t, kind=kind, publish_time_ns=pub)
+        except Exception as e:
+            self.errors += 1
+            if self.errors <= 3:
+                log.warning("cannot write message on %s: %s", key, e)
+
+    def _run(self) -> None:
+        world_alive = (self.world_info_key.rsplit("/world/info", 1)[0] + "/alive/world/"
+                       if self.world_info_key else None)
+        while True:
+            if self._want_info.is_set():
+                self._query_world_info()
+            try:
+                item = self._q.get(timeout=0.05)
+            except queue.Empty:
+                if self._stop.is_set():
+                    break
+                continue
+            self._write(*item)
+            if (world_alive and not self.have_world_info and item[2] == KIND_LIVELINESS
+                    and item[1].startswith(world_alive) and item[3] == b"put"):
+                self._want_info.set()
+
+    def stop(self) -> dict:
+        """Stop recording, finish the file; returns :meth:`stats`. Idempotent."""
+        for s in self._subs:
+            try:
+                s.undeclare()
+            except Exception:
+                pass
+        self._subs.clear()
+        if self._thread is not None:
+            self._stop.set()
+            self._thread.join()
+        if self._sink is not None:
+            self._sink.close()
+        return self.stats()
+
+    def stats(self) -> dict:
+        sink = self._sink
+        counts = dict(sink.counts) if sink else {}
+        return {"path": str(self.path), "messages": sum(counts.values()), "keys": len(counts),
+                "bytes": sink.bytes if sink else 0, "world_info": self.have_world_info,
+                "deletes_skipped": self.deletes_skipped, "errors": self.errors,
+                "counts": counts}
+
+    @property
+    def messages(self) -> int:
+        return sum(self._sink.counts.values()) if self._sink else 0
+
+    def __enter__(self) -> "Recorder":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+# --------------------------------------------------------------------------- CLI
+
+def resolve_keyexpr(expr: str | None, swarm: str) -> str:
+    """``None`` -> ``sc/<swarm>/**``; a key not starting with ``sc/`` is taken relative to it."""
+    prefix = f"{ROOT}/{swarm}"
+    if not expr:
+        return prefix + "/**"
+    if expr == ROOT or expr.startswith(ROOT + "/"):
+        return expr
+    return f"{prefix}/{expr.lstrip('/')}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    from bus.session import Shutdown, add_zenoh_args, open_session, setup_logging
+    from swarmcover.progress import Progress
+
+    p = argparse.ArgumentParser(prog="swarmcover record", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("keyexpr", nargs="?", default=None,
+                   help="key expression to record (default sc/<swarm>/**; a key not starting "
+                        "with 'sc/' is relative to sc/<swarm>/)")
+    p.add_argument("-o", "--output", required=True, metavar="FILE.mcap", help="output MCAP file")
+    p.add_argument("--exclude", "-x", action="append", default=[], metavar="KEYEXPR",
+                   help="do not record keys matching this (relative like KEYEXPR); repeatable")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="stop after S seconds (default: until SIGINT/SIGTERM)")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
+    p.add_argument("--log-level", default="INFO")
+    add_zenoh_args(p)
+    args = p.parse_args(argv)
+    setup_logging(args.log_level, "swarmcover.record")
+    try:
+        from bus.keys import check_swarm
+        check_swarm(args.swarm)
+    except ValueError as e:
+        log.error("--swarm: %s", e)
+        return 2
+    keyexpr = resolve_keyexpr(args.keyexpr, args.swarm)
+    excludes = [resolve_keyexpr(x, args.swarm) for x in args.exclude]
+    try:
+        session = open_session(args)
+    except (ValueError, ConnectionError) as e:
+        log.error("%s", e)
+        return 2
+    rec = None
+    try:
+        with Shutdown() as stop:
+            try:
+                rec = Recorder(session, keyexpr, args.output, exclude=excludes,
+                               metadata={"swarm": args.swarm})
+                rec.start()
+            except (ValueError, OSError) as e:
+                log.error("%s", e)
+                return 2
+            print(f"READY record {keyexpr} -> {args.output}", flush=True)
+            end = None if args.duration is None else time.monotonic() + args.duration
+            with Progress(label="record", unit="msg", enabled=not args.quiet) as prog:
+                while not stop.wait(0.2):
+                    prog.set(rec.messages, note=f"{len(rec._sink.counts)} keys")
+                    if end is not None and time.monotonic() >= end:
+                        break
+                stats = rec.stop()
+                prog.set(stats["messages"], note=f"{stats['keys']} keys")
+            info = "" if stats["world_info"] else " (no world/info: world not up?)"
+            print(f"recorded {stats['messages']} messages on {stats['keys']} keys, "
+                  f"{stats['bytes']} payload bytes -> {args.output}{info}", file=sys.stderr)
+    finally:
+        if rec is not None:
+            rec.stop()
+        session.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,224 @@
+"""Recording to MCAP and replaying: schemas, the sink, the Recorder class, and a recorded
+synthetic run replayed into ``swarmcover topics echo --raw`` with identical payloads."""
+from __future__ import annotations
+
+import json
+import signal
+import sys
+import threading
+import time
+import uuid
+from collections import defaultdict
+
+import pytest
+from mcap.reader import make_reader
+
+from bus import messages as m
+from bus.keys import Keys
+from bus.session import Mailbox
+from procs import client_session
+from swarmcover.record import McapSink, Recorder, resolve_keyexpr, schema_for
+from swarmcover.replay import read_messages, remap_key, summary_counts
+from viz.synth import Scenario
+
+SYNTH = [sys.executable, "-m", "viz.synth"]
+
+
+# --------------------------------------------------------------------------- pure parts
+
+def test_schema_describes_every_field_of_every_message():
+    for tag, cls in m.REGISTRY.items():
+        s = schema_for(cls)
+        json.dumps(s)  # serialisable
+        wire = cls().to_dict()
+        assert set(s["properties"]) == set(wire), tag
+        assert s["properties"]["_t"] == {"const": tag}
+        assert s["required"] == list(s["properties"])
+    sense = schema_for(m.Sense)["properties"]
+    assert sense["bearings"]["type"] == "array"
+    assert sense["bearings"]["items"]["type"] == "number"
+    assert sense["bearings"]["items"]["maximum"] == pytest.approx(3.141592654589793)
+    assert sense["ids"]["items"] == {"type": "integer", "minimum": 0, "maximum": 2**62}
+    status = schema_for(m.Status)["properties"]
+    assert status["state"]["enum"] == list(m.AGENT_STATES)
+    assert schema_for(m.WorldInfo)["properties"]["obstacles"]["items"]["type"] == "array"
+    assert schema_for(m.Truth)["x-same-length"] == [["ids", "x", "y", "theta", "live"]]
+
+
+def test_keyexpr_resolution_and_swarm_remap():
+    assert resolve_keyexpr(None, "lab") == "sc/lab/**"
+    assert resolve_keyexpr("world/**", "lab") == "sc/lab/world/**"
+    assert resolve_keyexpr("sc/other/**", "lab") == "sc/other/**"
+    assert remap_key("sc/a/world/truth", "b") == "sc/b/world/truth"
+    assert remap_key("sc/a/world/truth", None) == "sc/a/world/truth"
+    assert remap_key("other/key", "b") == "other/key"
+
+
+def test_sink_writes_schemas_channels_and_exact_bytes(tmp_path):
+    k = Keys("s1")
+    sc = Scenario()
+    path = tmp_path / "x.mcap"
+    truth = sc.truth(3, 0.5, 7, 0.35)
+    sent = [(k.truth, truth.encode(), 2_000, "put"),
+            (k.world_info, sc.info.encode(), 1_000, "query_reply"),
+            (k.alive("robot", 3), b"put", 1_500, "liveliness"),
+            (k.complex, sc.complex(3, 0.3).encode(), 3_000, "put"),
+            ("sc/s1/unknown/thing", b"\x93\x01\x02\x03", 4_000, "put"),
+            (k.alive("robot", 3), b"delete", 5_000, "liveliness")]
+    with McapSink(path, metadata={"swarm": "s1"}) as sink:
+        for key, data, t, kind in sent:
+            sink.write(key, data, t, kind=kind)
+        with pytest.raises(ValueError, match="kind='bogus'"):
+            sink.write(k.truth, b"", 1, kind="bogus")
+    got = list(read_messages(path))
+    assert [(r.key, r.data, r.log_time_ns, r.kind) for r in got] == sorted(
+        [(a, b, c, d) for a, b, c, d in sent], key=lambda x: x[2])
+    schemas = {r.key: r.schema for r in got}
+    assert schemas[k.truth] == "Truth" and schemas[k.complex] == "Complex"
+    assert schemas[k.world_info] == "WorldInfo" and schemas["sc/s1/unknown/thing"] == ""
+    n, chans = summary_counts(path)
+    assert n == len(sent)
+    assert chans[k.alive("robot", 3)] == "liveliness"
+    with open(path, "rb") as f:
+        r = make_reader(f)
+        summ = r.get_summary()
+        for sch in summ.schemas.values():
+            assert sch.encoding == "jsonschema"
+            assert json.loads(sch.data)["title"] == sch.name
+        assert {c.message_encoding for c in summ.channels.values()} == {"msgpack", "liveliness"}
+        meta = list(r.iter_metadata())
+        assert meta and meta[0].metadata["swarm"] == "s1"
+
+
+def test_missing_directory_and_bad_file_are_named(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nowhere"):
+        McapSink(tmp_path / "nowhere" / "x.mcap")
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"not an mcap file at all")
+    with pytest.raises(ValueError, match="bad.mcap"):
+        list(read_messages(bad))
+
+
+# --------------------------------------------------------------------------- Recorder
+
+def test_recorder_excludes_counts_and_fetches_world_info_when_world_appears(router, tmp_path):
+    swarm = "rec" + uuid.uuid4().hex[:8]
+    k = Keys(swarm)
+    rec_s = client_session(router, swarm)
+    pub_s = client_session(router, swarm)
+    path = tmp_path / "r.mcap"
+    info = Scenario().info.encode()
+    stop = threading.Event()
+    rec = Recorder(rec_s, k.all, path, exclude=[f"{k.prefix}/robot/*/sense"])
+    try:
+        rec.start()
+        time.sleep(0.5)
+        for i in range(20):
+            pub_s.put(k.demo, m.Demo(seq=i, t=0.0, text="x").encode())
+            pub_s.put(k.sense(1), m.Sense(robot=1, tick=i).encode())
+        # the world comes up late: the recorder must query world/info when its token appears
+        q = pub_s.declare_queryable(k.world_info)
+
+        def serve():
+            while not stop.is_set():
+                query = q.try_recv()
+                if query is None:
+                    time.sleep(0.01)
+                    continue
+                query.reply(k.world_info, info)
+                query.drop()
+
+        th = threading.Thread(target=serve, daemon=True)
+        th.start()
+        tok = pub_s.liveliness().declare_token(k.alive("world", "main"))
+        deadline = time.monotonic() + 20
+        while (rec.messages < 22 or not rec.have_world_info) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        stats = rec.stop()
+        tok.undeclare()
+        stop.set()
+        th.join(2)
+        q.undeclare()
+    finally:
+        rec.stop()
+        rec_s.close()
+        pub_s.close()
+    assert stats["world_info"] is True
+    assert stats["counts"][k.demo] == 20
+    assert k.sense(1) not in stats["counts"]
+    got = list(read_messages(path))
+    assert [r.data for r in got if r.key == k.demo] == [
+        m.Demo(seq=i, t=0.0, text="x").encode() for i in range(20)]
+    assert any(r.key == k.world_info and r.kind == "query_reply" and r.data == info for r in got)
+    assert any(r.key == k.alive("world", "main") and r.data == b"put" for r in got)
+
+
+# --------------------------------------------------------------------------- end to end
+
+def test_recorded_run_replays_into_topics_echo_with_identical_payloads(router, zargs, procs,
+                                                                       tmp_path):
+    out = tmp_path / "run.mcap"
+    swarm = zargs[zargs.index("--swarm") + 1]
+    k = Keys(swarm)
+    rec = procs.swarmcover("record", "-o", out, "-q", *zargs)
+    rec.wait_line("READY record", timeout=30)
+    synth = procs.start(SYNTH + ["--cycles", "8", "--cycle-s", "0.2", "--kill", "6:2", *zargs])
+    synth.wait_line("DONE synth", timeout=60)
+    assert synth.wait(20) == 0
+    time.sleep(0.5)
+    rec.signal(signal.SIGINT)
+    assert rec.wait(20) == 0, rec.output()
+
+    recorded = list(read_messages(out))
+    puts = defaultdict(list)
+    for r in recorded:
+        if r.kind == "put":
+            puts[r.key].append(r.data)
+    assert len(puts[k.truth]) >= 20 and len(puts[k.complex]) == 8, {a: len(b) for a, b in puts.items()}
+    for key, datas in puts.items():
+        for d in datas:
+            m.decode(d)  # everything recorded is a valid message
+    info = [r for r in recorded if r.kind == "query_reply"]
+    assert len(info) == 1 and info[0].key == k.world_info
+    tokens = {(r.key, r.data) for r in recorded if r.kind == "liveliness"}
+    assert (k.alive("robot", 2), b"put") in tokens and (k.alive("robot", 2), b"delete") in tokens
+
+    # replay into `topics echo --raw`, a liveliness monitor and a world/info query
+    echo = procs.swarmcover("topics", "echo", "**", "--raw", *zargs)
+    echo.wait_line("# echo", timeout=30)
+    mon = client_session(zargs[1], swarm)
+    seen_tokens = Mailbox()
+    lsub = mon.liveliness().declare_subscriber(k.alive("robot", "*"), seen_tokens.callback,
+                                               history=True)
+    try:
+        span = (recorded[-1].log_time_ns - recorded[0].log_time_ns) / 1e9
+        t0 = time.monotonic()
+        rep = procs.swarmcover("replay", out, "--rate", "2", "--start-delay", "1.0",
+                               "--hold", "30", "-q", *zargs)
+        rep.wait_line("READY replay", timeout=30)
+        replies = list(mon.get(k.world_info, timeout=5))
+        assert [r.ok.payload.to_bytes() for r in replies if r.ok] == [info[0].data]
+        n_puts = sum(len(v) for v in puts.values())
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            if sum(1 for line in echo.lines if line.startswith("{")) >= n_puts:
+                break
+            time.sleep(0.1)
+        elapsed = time.monotonic() - t0
+        rep.signal(signal.SIGINT)
+        assert rep.wait(20) == 0, rep.output()
+    finally:
+        lsub.undeclare()
+        mon.close()
+    echo.signal(signal.SIGINT)
+    echo.wait(20)
+    got = defaultdict(list)
+    for line in echo.lines:
+        if line.startswith("{"):
+            d = json.loads(line)
+            got[d["key"]].append(bytes.fromhex(d["bytes"]))
+    assert dict(got) == dict(puts)  # same keys, same payload bytes, same order per key
+    assert elapsed >= 0.8 * span / 2  # original timing (at rate 2) was kept, not rushed
+    robots_seen = {int(key.rsplit("/", 1)[1]) for key, _, kind in seen_tokens.drain()
+                   if str(kind).endswith("PUT")}
+    assert robots_seen == {int(key.rsplit("/", 1)[1]) for key, d in tokens if "robot" in key}
