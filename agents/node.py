@@ -227,13 +227,13 @@ def main(argv: list[str] | None = None) -> int:
         log.error("--id %d: must be >= 0", args.id)
         return 2
     keys = keys_from_args(args)
-    try:
-        session = open_session(args)
-    except (ValueError, ConnectionError) as e:
-        log.error("%s", e)
-        return 2
     node = None
-    with Shutdown() as stop:
+    with Shutdown() as stop:  # installed first: a signal during start-up is a clean exit
+        try:
+            session = open_session(args)
+        except (ValueError, ConnectionError) as e:
+            log.error("%s", e)
+            return 2
         try:
             try:
                 params = resolve_params(args, session, keys, stop, log)
