@@ -66,29 +66,39 @@ def find_recording(path: str | Path) -> Path:
     return p
 
 
-def load_run(path: str | Path, *, max_truth_frames: int = 400) -> RunData:
+def load_run(path: str | Path, *, max_truth_frames: int = 400, progress: bool = False) -> RunData:
     """Read a recording: the WorldInfo, and one Frame per Complex cycle (the last Complex of
     each cycle with the latest Truth before it); without Complexes, up to
     ``max_truth_frames`` Truths evenly spread in time."""
-    from swarmcover.replay import read_messages
+    from swarmcover.progress import Progress
+    from swarmcover.replay import read_messages, summary_counts
 
     src = find_recording(path)
+    total, _ = summary_counts(src)
+    prog = Progress(total=total or None, label="plot: reading", unit="msg", enabled=progress)
+    live_ids: set[int] = set()
     info = None
     truth = None
     mocap: dict[int, tuple[float, float]] = {}
     frames: dict[int, Frame] = {}
     truths: list[tuple[float, m.Truth, dict]] = []
     pending: list[Frame] = []
+    n_truth, stride, last_truth = 0, 1, None
     invalid = 0
     n = 0
     t0 = None
     for r in read_messages(src):
         n += 1
+        if n % 5000 == 0:
+            prog.set(n)
         if t0 is None:
             t0 = r.log_time_ns
         k = r.key
         want = (k.endswith("/world/info") or k.endswith("/world/truth")
-                or k.endswith("/coord/complex") or k.endswith("/odom"))
+                or k.endswith("/coord/complex"))
+        if k.endswith("/odom"):  # only live robots' odometry can be mocap: skip the rest cheaply
+            parts = k.split("/")
+            want = len(parts) >= 3 and parts[-2].isdigit() and int(parts[-2]) in live_ids
         if r.kind == "liveliness" or not want:
             continue
         try:
@@ -103,7 +113,15 @@ def load_run(path: str | Path, *, max_truth_frames: int = 400) -> RunData:
             info = info or msg
         elif isinstance(msg, m.Truth):
             truth = msg
-            truths.append((t, msg, dict(mocap)))
+            live_ids = {i for i, lv in zip(msg.ids, msg.live) if lv}
+            if not frames:  # kept only for runs without a coordinator, thinned as they grow
+                n_truth += 1
+                if n_truth % stride == 0:
+                    truths.append((t, msg, dict(mocap)))
+                    if len(truths) >= 2 * max_truth_frames:
+                        truths = truths[1::2]
+                        stride *= 2
+                last_truth = (t, msg, dict(mocap))
             for f in pending:  # Complexes that came before any Truth get the first one
                 f.truth = msg
             pending.clear()
@@ -114,11 +132,14 @@ def load_run(path: str | Path, *, max_truth_frames: int = 400) -> RunData:
             frames[msg.cycle] = Frame(msg, truth, dict(mocap), t)
             if truth is None:
                 pending.append(frames[msg.cycle])
+    prog.close()
     if frames:
         out = [frames[c] for c in sorted(frames)]
         by_cycle = True
     else:
         by_cycle = False
+        if last_truth is not None and (not truths or truths[-1][1] is not last_truth[1]):
+            truths.append(last_truth)
         step = max(1, math.ceil(len(truths) / max_truth_frames))
         picked = truths[::step]
         if truths and picked[-1] is not truths[-1]:
@@ -201,7 +222,7 @@ def make_plots(path: str | Path, out: str | Path | None = None, *, cycles: list[
     from .coverage import coverage_measure
     from .figures import render_progress, render_snapshot, snapshot_image, write_gif
 
-    run = load_run(path)
+    run = load_run(path, progress=progress)
     cov_fn, cov_label = coverage_measure("none" if run.info.name == NO_MAP else coverage)
     if not run.frames:
         raise ValueError(f"{run.source}: no Truth or Complex messages to plot "

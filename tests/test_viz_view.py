@@ -1,0 +1,138 @@
+"""The live view: state from Zenoh (synthetic run on the real keys), served over HTTP, and
+drawn by the page in headless Chromium (skipped with a reason if Chromium is absent)."""
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from bus.keys import Keys
+from procs import client_session, free_port
+from viz.synth import Scenario
+from viz.view import LiveState, Snapshot, map_json, render_page
+
+SYNTH = [sys.executable, "-m", "viz.synth"]
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+CYCLES, KILL = 10, (7, 3)
+
+
+def test_live_state_counts_tokens_and_bodies():
+    k = Keys("ls")
+    sc = Scenario()
+    st = LiveState(coverage="disks", coverage_period_s=0.0)
+    st.set_info(sc.info)
+    st.on_message(k.truth, sc.truth(5, 0.5, 1, 0.1))
+    st.on_message(k.complex, sc.complex(5, 0.1))
+    for r in range(6):
+        st.on_token(k, k.alive("robot", r), True)
+    st.on_token(k, k.alive("robot", 2), False)
+    st.on_token(k, k.alive("world", "main"), True)
+    st.update_coverage(0.0)
+    snap = st.snapshot()
+    assert snap["alive"] == [0, 1, 3, 4, 5] and snap["roles"]["world"] is True
+    assert len(snap["robots"]) == 6 and snap["cycle"] == 5
+    assert [r[6] for r in snap["robots"]] == [1, 1, 0, 1, 1, 1]  # robot 2 has no agent
+    assert 0 < snap["coverage"] < 1
+    assert len(snap["edges"]) == len(sc.complex(5, 0.1).edges) // 2
+    json.dumps(snap)
+    store = Snapshot()
+    store.put(snap, map_json(st.info, st.map_version))
+    page = render_page(store).decode()
+    assert "/*__INITIAL__*/" not in page and '"version":1' in page and "</script>" in page
+    st.set_info(sc.info)  # the same map again: no new version for the page to fetch
+    assert st.map_version == 1
+
+
+def _get_json(url: str):
+    with urllib.request.urlopen(url, timeout=5) as r:
+        return json.loads(r.read())
+
+
+def _start_live(procs, zargs):
+    """Synthetic run + view; returns (view url, expected alive robots)."""
+    synth = procs.start(SYNTH + ["--cycles", str(CYCLES), "--cycle-s", "0.15", "--hold", "60",
+                                 "--kill", f"{KILL[0]}:{KILL[1]}", *zargs])
+    synth.wait_line("READY synth", timeout=30)
+    port = free_port()
+    view = procs.swarmcover("view", "--port", port, *zargs)
+    line = view.wait_line("READY view", timeout=30)
+    url = line.split()[-1]
+    expected = Scenario(kills={KILL[0]: [KILL[1]]}).present(CYCLES - 1)
+    deadline = time.monotonic() + 40
+    st = {}
+    while time.monotonic() < deadline:
+        try:
+            st = _get_json(url + "state")
+        except OSError:
+            st = {}
+        if st.get("cycle") == CYCLES - 1 and st.get("alive") == expected and st.get("map_version"):
+            break
+        time.sleep(0.2)
+    assert st.get("cycle") == CYCLES - 1, st
+    return url, expected, st
+
+
+def _alive_robots(endpoint: str, swarm: str) -> list[int]:
+    s = client_session(endpoint, swarm)
+    try:
+        replies = list(s.liveliness().get(Keys(swarm).alive_robots(), timeout=3))
+        return sorted(int(str(r.ok.key_expr).rsplit("/", 1)[1]) for r in replies if r.ok)
+    finally:
+        s.close()
+
+
+def test_view_serves_state_matching_liveliness(router, zargs, procs):
+    url, expected, st = _start_live(procs, zargs)
+    alive = _alive_robots(router, zargs[zargs.index("--swarm") + 1])
+    assert alive == expected
+    assert st["alive"] == alive
+    assert sorted(r[0] for r in st["robots"]) == alive  # every body has its agent token
+    assert st["roles"]["world"] and st["roles"]["coordinator"]
+    assert st["coverage"] is not None and 0 < st["coverage"] < 1
+    assert len(st["frontier"]) + len(st["obstacle"]) > 0
+    mp = _get_json(url + "map")
+    assert mp["version"] == st["map_version"] and len(mp["boundary"]) == 4
+    with urllib.request.urlopen(url, timeout=5) as r:
+        page = r.read().decode()
+    assert "<canvas" in page and "window.swarmState" in page
+    assert "http://" not in page.replace(url, "") and "https://" not in page  # no CDN
+    with pytest.raises(urllib.error.HTTPError):
+        urllib.request.urlopen(url + "nope", timeout=5)
+
+
+def _chromium(args: list[str], timeout: float = 90) -> subprocess.CompletedProcess:
+    with tempfile.TemporaryDirectory() as profile:
+        return subprocess.run(
+            [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+             "--no-first-run", "--disable-background-networking", "--disable-component-update",
+             "--disable-sync", "--disable-dev-shm-usage", f"--user-data-dir={profile}", *args],
+            capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed "
+                    "(apt-get install -y chromium); the browser test needs it")
+def test_browser_draws_every_alive_robot(router, zargs, procs, tmp_path):
+    url, expected, _ = _start_live(procs, zargs)
+    alive = _alive_robots(router, zargs[zargs.index("--swarm") + 1])
+    assert alive == expected
+    shot = tmp_path / "view.png"
+    r = _chromium([f"--screenshot={shot}", "--window-size=1000,700", url])
+    assert shot.exists(), r.stderr[-2000:]
+    img = np.asarray(Image.open(shot).convert("RGB"), dtype=np.int16)
+    red = (img[..., 0] > 180) & (img[..., 1] < 80) & (img[..., 2] < 80)
+    assert img.shape[:2] == (700, 1000) and red.sum() > 100  # robots were painted
+    r = _chromium(["--virtual-time-budget=3000", "--dump-dom", url])
+    m = re.search(r'<pre id="swarm-state"[^>]*>([^<]*)</pre>', r.stdout)
+    assert m, r.stdout[-2000:] + r.stderr[-2000:]
+    state = json.loads(m.group(1))
+    assert state["robots_drawn"] == state["robots_alive"] == len(alive), state
+    assert state["cycle"] == CYCLES - 1 and state["map"] is True and state["draws"] >= 1

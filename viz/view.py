@@ -1,0 +1,381 @@
+"""``swarmcover view [--port P]``: live view of the swarm in the browser.
+
+A local web page (one HTML file with a canvas, no build step, no network access) draws the
+robots, the complex and the fence (frontier K, obstacle O) of a live run or of a replay,
+under a header with cycle, robots alive, coverage and state.
+
+Data flow: Zenoh callbacks only enqueue (bus.session.Mailbox); the main loop (``pump``)
+decodes, updates a :class:`LiveState` and publishes a JSON snapshot at most ``max_hz``
+times a second into a :class:`Snapshot` store; the HTTP server (stdlib ThreadingHTTPServer,
+its own threads) only reads that store. Endpoints:
+  /        the page, with the current map and state inlined (drawn on load)
+  /state   latest state JSON (the page polls it 4x a second)
+  /map     the map JSON (WorldInfo as polygons), refetched when ``map_version`` changes
+  /healthz "ok"
+Robots alive are the liveliness tokens ``alive/robot/*``; robots drawn are the bodies in
+the latest Truth. The page exposes ``window.swarmState`` ({robots_drawn, robots_alive,
+cycle, ...}) and mirrors it into ``<pre id="swarm-state">`` for headless tests.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import threading
+import time
+from http import HTTPStatus
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+
+from bus import messages as m
+from bus.keys import Keys
+
+from .coverage import coverage_measure, map_bounds, polygon_xy
+from .geometry import build_scene
+
+log = logging.getLogger("swarmcover.view")
+PAGE = Path(__file__).with_name("static") / "view.html"
+_ROLES = ("world", "coordinator", "hwbridge")
+
+
+def _r(v: float) -> float:
+    return round(float(v), 4)
+
+
+def map_json(info: m.WorldInfo | None, version: int) -> dict:
+    """The map for the page: polygons as [[x, y], ...] lists (m), bounds, rv, sources."""
+    if info is None:
+        return {"version": 0}
+    return {"version": version, "name": info.name, "rv": info.rv,
+            "robot_radius": info.robot_radius,
+            "boundary": polygon_xy(info.boundary).round(4).tolist(),
+            "obstacles": [polygon_xy(o).round(4).tolist() for o in info.obstacles],
+            "sources": [[_r(v) for v in info.sources[k:k + 3]]
+                        for k in range(0, len(info.sources) - 2, 3)],
+            "bounds": [_r(v) for v in map_bounds(info, margin=0.05 * info.rv)]}
+
+
+class LiveState:
+    """The latest of everything the page shows. Pure: fed decoded messages, no I/O.
+
+    coverage_fn(info, truth) -> fraction or None is re-evaluated at most every
+    ``coverage_period_s`` seconds of wall time (it rasterises the map).
+    """
+
+    def __init__(self, coverage: str = "auto", coverage_period_s: float = 0.5):
+        self.info: m.WorldInfo | None = None
+        self.map_version = 0
+        self.truth: m.Truth | None = None
+        self.cx: m.Complex | None = None
+        self.mocap: dict[int, tuple[float, float]] = {}
+        self.alive: set[int] = set()
+        self.roles: dict[str, bool] = {r: False for r in _ROLES}
+        self.coverage_fn, self.coverage_label = coverage_measure(coverage)
+        self.coverage: float | None = None
+        self._cov_at = -1e9
+        self._cov_dirty = False
+        self.coverage_period_s = coverage_period_s
+        self.seq = 0
+
+    def set_info(self, info: m.WorldInfo) -> None:
+        if self.info is None or info.encode() != self.info.encode():
+            self.info = info
+            self.map_version += 1
+            self._cov_dirty = True
+            self.seq += 1
+
+    def on_message(self, key: str, msg: m.Message) -> None:
+        if isinstance(msg, m.Truth):
+            self.truth = msg
+            self._cov_dirty = True
+        elif isinstance(msg, m.Complex):
+            self.cx = msg
+        elif isinstance(msg, m.Pose):
+            if msg.source == "mocap":
+                self.mocap[msg.robot] = (msg.x, msg.y)
+        elif isinstance(msg, m.WorldInfo):
+            self.set_info(msg)
+            return
+        else:
+            return
+        self.seq += 1
+
+    def on_token(self, keys: Keys, key: str, present: bool) -> None:
+        rel = keys.relative(key).split("/")
+        if len(rel) < 3 or rel[0] != "alive":
+            return
+        if rel[1] == "robot" and rel[2].isdigit():
+            rid = int(rel[2])
+            (self.alive.add if present else self.alive.discard)(rid)
+            if not present:
+                self.mocap.pop(rid, None)
+        elif rel[1] in self.roles:
+            self.roles[rel[1]] = present
+        self.seq += 1
+
+    def update_coverage(self, now: float) -> None:
+        if not self._cov_dirty or now - self._cov_at < self.coverage_period_s:
+            return
+        self._cov_at = now
+        self._cov_dirty = False
+        if self.info is not None and self.truth is not None:
+            cov = self.coverage_fn(self.info, self.truth)
+            if cov != self.coverage:
+                self.coverage = cov
+                self.seq += 1
+
+    def snapshot(self) -> dict:
+        """The page's state JSON: robots as [id, x, y, live, in_complex, redundant, alive]."""
+        sc = build_scene(self.truth, self.cx, self.mocap)
+        robots = [[int(i), _r(x), _r(y), int(lv), int(inc), int(red), int(int(i) in self.alive)]
+                  for i, (x, y), lv, inc, red in zip(sc.ids, sc.xy, sc.live, sc.in_complex,
+                                                     sc.redundant)]
+        seg = lambda a: a.reshape(-1, 4).round(4).tolist()  # noqa: E731
+        cx = self.cx
+        return {"seq": self.seq, "map_version": self.map_version,
+                "t": None if self.truth is None else _r(self.truth.t),
+                "tick": None if self.truth is None else self.truth.tick,
+                "cycle": None if cx is None else cx.cycle,
+                "state": None if cx is None else cx.state,
+                "certified": bool(cx.certified) if cx else False,
+                "coverage": None if self.coverage is None else round(self.coverage, 5),
+                "coverage_label": self.coverage_label,
+                "alive": sorted(self.alive), "roles": dict(self.roles),
+                "robots": robots,
+                "mocap": [[int(k), _r(x), _r(y)] for k, (x, y) in sorted(self.mocap.items())],
+                "edges": seg(sc.edges), "frontier": seg(sc.frontier),
+                "obstacle": seg(sc.obstacle),
+                "triangles": sc.triangles.reshape(-1, 6).round(4).tolist()}
+
+
+class Snapshot:
+    """Thread-safe store of the latest state and map JSON bytes (written by the main loop)."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self.state = b'{"seq":-1,"robots":[],"alive":[],"cycle":null}'
+        self.map = b'{"version":0}'
+        self.state_obj: dict = {}
+        self.map_obj: dict = {"version": 0}
+
+    def put(self, state: dict, map_obj: dict | None = None) -> None:
+        sb = json.dumps(state, separators=(",", ":")).encode()
+        mb = json.dumps(map_obj, separators=(",", ":")).encode() if map_obj is not None else None
+        with self._lock:
+            self.state, self.state_obj = sb, state
+            if mb is not None:
+                self.map, self.map_obj = mb, map_obj
+
+    def get(self) -> tuple[bytes, bytes, dict, dict]:
+        with self._lock:
+            return self.state, self.map, self.state_obj, self.map_obj
+
+
+def render_page(store: Snapshot, template: str | None = None) -> bytes:
+    """The page with the current map and state inlined, so it draws on load."""
+    html = template if template is not None else PAGE.read_text(encoding="utf-8")
+    _, _, st, mp = store.get()
+    initial = json.dumps({"map": mp if mp.get("version") else None, "state": st or None},
+                         separators=(",", ":")).replace("</", "<\\/")
+    return html.replace("/*__INITIAL__*/null", initial, 1).encode("utf-8")
+
+
+def make_handler(store: Snapshot, template: str):
+    class Handler(BaseHTTPRequestHandler):
+        server_version = "swarmcover-view"
+
+        def _send(self, body: bytes, ctype: str, status=HTTPStatus.OK) -> None:
+            self.send_response(status)
+            self.send_header("Content-Type", ctype)
+            self.send_header("Content-Length", str(len(body)))
+            self.send_header("Cache-Control", "no-store")
+            self.end_headers()
+            if self.command != "HEAD":
+                self.wfile.write(body)
+
+        def do_GET(self):  # noqa: N802 (stdlib naming)
+            path = self.path.split("?", 1)[0]
+            try:
+                if path in ("/", "/index.html"):
+                    self._send(render_page(store, template), "text/html; charset=utf-8")
+                elif path == "/state":
+                    self._send(store.get()[0], "application/json")
+                elif path == "/map":
+                    self._send(store.get()[1], "application/json")
+                elif path == "/healthz":
+                    self._send(b"ok\n", "text/plain")
+                else:
+                    self._send(b"not found\n", "text/plain", HTTPStatus.NOT_FOUND)
+            except (BrokenPipeError, ConnectionResetError):
+                pass
+
+        do_HEAD = do_GET
+
+        def log_message(self, fmt, *args):  # quiet: access logs only at debug level
+            log.debug("%s %s", self.address_string(), fmt % args)
+
+    return Handler
+
+
+class ViewServer:
+    """The live view on an open session (``run`` can embed it; ``main`` wraps it).
+
+    keys: the swarm's Keys; host/port: where to serve (port 0 = any free port; see
+    ``url``); max_hz: snapshot rate limit; coverage: viz.coverage kind.
+    Call ``start()``, then ``pump()`` from the owning thread's loop, then ``close()``.
+    """
+
+    def __init__(self, session, keys: Keys, *, host: str = "127.0.0.1", port: int = 8765,
+                 max_hz: float = 10.0, coverage: str = "auto", info_retry_s: float = 2.0):
+        from bus.session import Mailbox, Receiver
+        self.session = session
+        self.keys = keys
+        self.state = LiveState(coverage=coverage)
+        self.store = Snapshot()
+        self.mailbox = Mailbox(maxsize=100_000)
+        self.tokens = Mailbox(maxsize=100_000)
+        self.receiver = Receiver(log)
+        self.min_dt = 1.0 / max_hz if max_hz > 0 else 0.0
+        self.info_retry_s = info_retry_s
+        self._subs: list = []
+        self._published_seq = -1
+        self._published_map = -1
+        self._last_pub = -1e9
+        self._info_at = -1e9
+        self._want_info = True
+        template = PAGE.read_text(encoding="utf-8")
+        self.httpd = ThreadingHTTPServer((host, port), make_handler(self.store, template))
+        self.httpd.daemon_threads = True
+        self._http_thread: threading.Thread | None = None
+
+    @property
+    def url(self) -> str:
+        host, port = self.httpd.server_address[:2]
+        return f"http://{host}:{port}/"
+
+    def start(self) -> "ViewServer":
+        k = self.keys
+        for key in (k.truth, k.complex, f"{k.prefix}/robot/*/odom"):
+            self._subs.append(self.session.declare_subscriber(key, self.mailbox.callback))
+        self._subs.append(self.session.liveliness().declare_subscriber(
+            f"{k.prefix}/alive/**", self.tokens.callback, history=True))
+        self._publish(force=True)
+        self._http_thread = threading.Thread(target=self.httpd.serve_forever, name="view-http",
+                                             kwargs={"poll_interval": 0.2}, daemon=True)
+        self._http_thread.start()
+        return self
+
+    def _query_info(self) -> None:
+        self._want_info = False
+        self._info_at = time.monotonic()
+        try:
+            for reply in self.session.get(self.keys.world_info, timeout=1.0):
+                s = reply.ok
+                if s is None:
+                    continue
+                msg = self.receiver.decode(str(s.key_expr), s.payload.to_bytes(), m.WorldInfo)
+                if msg is not None:
+                    self.state.set_info(msg)
+        except Exception as e:  # a failed query only delays the map
+            log.warning("world/info query failed: %s", e)
+
+    def pump(self, timeout: float = 0.05) -> int:
+        """Handle what arrived (waiting up to ``timeout`` s for the first item); returns count."""
+        import zenoh
+        n = 0
+        first = self.mailbox.get(timeout)
+        items = ([first] if first is not None else []) + self.mailbox.drain()
+        for key, payload, _kind in items:
+            msg = self.receiver.decode(key, payload)
+            if msg is not None:
+                self.state.on_message(key, msg)
+            n += 1
+        for key, _payload, kind in self.tokens.drain():
+            present = kind == zenoh.SampleKind.PUT
+            self.state.on_token(self.keys, key, present)
+            if present and self.keys.relative(key).startswith("alive/world/"):
+                self._want_info = True
+            n += 1
+        now = time.monotonic()
+        if self.state.info is None and now - self._info_at >= self.info_retry_s:
+            self._want_info = True
+        if self._want_info:
+            self._query_info()
+        self.state.update_coverage(now)
+        self._publish()
+        return n
+
+    def _publish(self, force: bool = False) -> None:
+        now = time.monotonic()
+        st = self.state
+        if not force and (st.seq == self._published_seq or now - self._last_pub < self.min_dt):
+            return
+        self._last_pub = now
+        self._published_seq = st.seq
+        mp = None
+        if st.map_version != self._published_map:
+            mp = map_json(st.info, st.map_version)
+            self._published_map = st.map_version
+        self.store.put(st.snapshot(), mp)
+
+    def close(self) -> None:
+        for s in self._subs:
+            try:
+                s.undeclare()
+            except Exception:
+                pass
+        self._subs.clear()
+        if self._http_thread is not None:
+            self.httpd.shutdown()
+            self._http_thread.join(5)
+            self._http_thread = None
+        self.httpd.server_close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    from bus.session import Shutdown, add_zenoh_args, keys_from_args, open_session, setup_logging
+
+    from .coverage import KINDS
+
+    p = argparse.ArgumentParser(prog="swarmcover view", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--port", type=int, default=8765, help="HTTP port (default 8765; 0 = any free)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to serve on (default 127.0.0.1: this machine only)")
+    p.add_argument("--coverage", choices=KINDS, default="auto",
+                   help="coverage shown in the header (default auto)")
+    p.add_argument("--max-hz", type=float, default=10.0, help="state updates per second at most")
+    p.add_argument("--log-level", default="INFO")
+    add_zenoh_args(p)
+    args = p.parse_args(argv)
+    setup_logging(args.log_level, "swarmcover.view")
+    keys = keys_from_args(args)
+    try:
+        session = open_session(args)
+    except (ValueError, ConnectionError) as e:
+        log.error("%s", e)
+        return 2
+    view = None
+    try:
+        with Shutdown() as stop:
+            try:
+                view = ViewServer(session, keys, host=args.host, port=args.port,
+                                  max_hz=args.max_hz, coverage=args.coverage)
+            except OSError as e:
+                log.error("--host %s --port %d: cannot serve: %s", args.host, args.port, e)
+                return 2
+            view.start()
+            print(f"READY view {view.url}", flush=True)
+            log.info("live view of %s at %s", keys.prefix, view.url)
+            while not stop.is_set():
+                view.pump(0.05)
+    finally:
+        if view is not None:
+            view.close()
+        session.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
