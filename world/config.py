@@ -63,7 +63,7 @@ class Obstacle:
 class MapConfig:
     """[map]: exactly one of ``boundary`` (outer polygon) or ``ros_map`` (absolute path of a
     ROS map_server YAML). ROS tracing knobs: ``simplify`` (Douglas-Peucker tolerance, m;
-    0 = one map cell), ``min_hole_area`` (m^2; smaller non-free specks inside free space are
+    0 = half a map cell), ``min_hole_area`` (m^2; smaller non-free specks inside free space are
     ignored; < 0 = 4 cells), ``max_vertices`` (cap on traced polygon vertices, tolerance
     grows until met), ``max_cells`` (images larger than this are block-reduced, unknown and
     occupied winning). ``circle_segments``: polygon sides used for circle obstacles."""

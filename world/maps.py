@@ -482,10 +482,32 @@ def simplify_ring(ring: np.ndarray, tol: float) -> np.ndarray:
         r = r[:-1]
     if len(r) <= 3 or tol <= 0:
         return r
+    # anchor at an extreme point (a true corner, kept by any simplification)
+    r = np.roll(r, -int(np.argmax(((r - r.mean(0)) ** 2).sum(1))), axis=0)
     far = int(np.argmax(((r - r[0]) ** 2).sum(1)))
     a = douglas_peucker(r[:far + 1], tol)
     b = douglas_peucker(np.concatenate([r[far:], r[:1]]), tol)
     return np.concatenate([a[:-1], b[:-1]])
+
+
+def square_corners(ring: np.ndarray) -> np.ndarray:
+    """Undo marching-squares chamfers on a binary image's contour (pixel centres at integer
+    coordinates): between two consecutive points that differ in both x and y, insert the
+    pixel corner (the half-integer coordinate of each), giving the exact pixel boundary."""
+    r = np.asarray(ring, float)
+    q = np.roll(r, -1, axis=0)
+    cham = (np.abs(r[:, 0] - q[:, 0]) > 1e-9) & (np.abs(r[:, 1] - q[:, 1]) > 1e-9)
+    if not cham.any():
+        return r
+    half_x = np.abs(r[:, 0] - np.floor(r[:, 0]) - 0.5) < 1e-6
+    half_y = np.abs(r[:, 1] - np.floor(r[:, 1]) - 0.5) < 1e-6
+    cx = np.where(half_x, r[:, 0], q[:, 0])
+    cy = np.where(half_y, r[:, 1], q[:, 1])
+    out = np.empty((len(r) + int(cham.sum()), 2))
+    pos = np.arange(len(r)) + np.concatenate([[0], np.cumsum(cham)[:-1]])
+    out[pos] = r
+    out[pos[cham] + 1] = np.stack([cx[cham], cy[cham]], 1)
+    return out
 
 
 def _block_reduce_free(free: np.ndarray, f: int) -> np.ndarray:
@@ -569,8 +591,8 @@ def trace_free_region(free: np.ndarray, resolution: float, origin, *, seeds=(),
         if a > best_a:
             best, best_a = (pts, off), a
     pts, off = best
-    rings = [pts[off[k]:off[k + 1]] for k in range(len(off) - 1)]
-    tol = simplify if simplify > 0 else resolution
+    rings = [square_corners(pts[off[k]:off[k + 1]]) for k in range(len(off) - 1)]
+    tol = simplify if simplify > 0 else 0.5 * resolution
     tol_cells = tol / resolution
     while True:
         out = []

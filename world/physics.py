@@ -238,9 +238,11 @@ class Physics:
             ours, f = self._space_perm(fields)
             m = ours >= 0
             o = ours[m]
-            ang = f[m, 0]
-            cs, sn = np.cos(ang), np.sin(ang)
             cm = c[o]
+            # the velocity set now moves the body during the NEXT substep, while it turns
+            # from ang + w h to ang + 2 w h: aim along the midpoint heading
+            ang = f[m, 0] + np.where(dd[o], 1.5 * h * cm[:, 2], 0.0)
+            cs, sn = np.cos(ang), np.sin(ang)
             lv = live[o]
             vx = np.where(lv, cm[:, 0], cs * cm[:, 0] - sn * cm[:, 1])
             vy = np.where(lv, cm[:, 1], sn * cm[:, 0] + cs * cm[:, 1])

@@ -1,0 +1,116 @@
+"""Run-config loading: defaults, round trip, and errors that name file, section, field, value."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from world.config import ConfigError, load_config, loads_config, to_toml
+from world.maps import build_map, map_from_path, read_ros_yaml
+
+ROOT = Path(__file__).resolve().parent.parent
+CONFIGS = ROOT / "configs"
+
+BASE = """
+name = "t"
+rv = 1.0
+[map]
+boundary = [[0, 0], [4, 0], [4, 3], [0, 3]]
+sources = [{x = 0.5, y = 1.5}]
+"""
+
+
+def write(tmp_path, text, name="c.toml"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+@pytest.mark.parametrize("name", ["open_room", "structured", "small", "office_ros"])
+def test_shipped_configs_load_and_round_trip(name):
+    cfg = load_config(CONFIGS / f"{name}.toml")
+    assert cfg.rv == 1.0
+    again = loads_config(to_toml(cfg))
+    assert again.map == cfg.map and again.robots == cfg.robots
+    assert again.sensing == cfg.sensing and again.world == cfg.world
+    assert again.name == cfg.name and again.sections == cfg.sections
+
+
+def test_defaults_and_foreign_sections_kept_raw(tmp_path):
+    cfg = load_config(write(tmp_path, BASE + '[coordinator]\nfoo = 1\n[agent]\nbar = {x = 2}\n'))
+    assert cfg.world.mode == "lockstep" and cfg.world.dt == 0.05
+    assert cfg.robots.kind == "holonomic" and cfg.sensing.n_touch == 8
+    assert cfg.section("coordinator") == {"foo": 1}
+    assert cfg.section("agent") == {"bar": {"x": 2}}
+    assert cfg.section("hwbridge") == {}
+    assert loads_config(to_toml(cfg)).sections == cfg.sections
+
+
+@pytest.mark.parametrize("extra,section,field,value", [
+    ("[world]\nmodee = 'lockstep'\n", "world", "modee", "lockstep"),
+    ("[world]\nmode = 'fast'\n", "world", "mode", "fast"),
+    ("[world]\ndt = -0.1\n", "world", "dt", -0.1),
+    ("[robots]\nkind = 'tank'\n", "robots", "kind", "tank"),
+    ("[robots]\nradius = 'big'\n", "robots", "radius", "big"),
+    ("[sensing]\ndropout = 1.5\n", "sensing", "dropout", 1.5),
+    ("[sensing]\nn_touch = 0\n", "sensing", "n_touch", 0),
+    ("[world]\nspawn = [{robot = 1, source = 3}]\n", "world", "spawn[0].source", 3),
+])
+def test_bad_values_name_file_section_field_value(tmp_path, extra, section, field, value):
+    p = write(tmp_path, BASE + extra)
+    with pytest.raises(ConfigError) as ei:
+        load_config(p)
+    e = ei.value
+    assert (e.section, e.field, e.value) == (section, field, value)
+    msg = str(e)
+    assert str(p) in msg and f"[{section}]" in msg and field in msg and repr(value) in msg
+
+
+def test_map_errors(tmp_path):
+    with pytest.raises(ConfigError, match=r"\[map\] obstacles\[0\]\.type = 'blob'"):
+        load_config(write(tmp_path, BASE.replace("sources", "obstacles = [{type='blob'}]\nsources")))
+    with pytest.raises(ConfigError, match="either boundary or ros_map"):
+        load_config(write(tmp_path, BASE.replace("sources", "ros_map = 'x.yaml'\nsources")))
+    with pytest.raises(ConfigError, match=r"ros_map = 'nope.yaml': file not found"):
+        load_config(write(tmp_path, '[map]\nros_map = "nope.yaml"\n'))
+    with pytest.raises(ConfigError, match="missing"):
+        load_config(write(tmp_path, 'name = "x"\n'))
+    with pytest.raises(ConfigError, match=r"\[map\] boundary"):
+        load_config(write(tmp_path, '[map]\nboundary = [[0, 0], [1, 1]]\n'))
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        load_config(write(tmp_path, '[map\n'))
+    with pytest.raises(ConfigError, match="unknown top-level field"):
+        load_config(write(tmp_path, 'speed = 3\n' + BASE))
+    # a source inside an obstacle is not in free space
+    cfg = load_config(write(tmp_path, BASE.replace(
+        "sources", "obstacles = [{type='circle', center=[0.5, 1.5], radius=0.3}]\nsources")))
+    with pytest.raises(ConfigError, match=r"\[map\] sources\[0\].*not in free space"):
+        build_map(cfg)
+
+
+def test_ros_yaml_errors(tmp_path):
+    img = tmp_path / "m.pgm"
+    img.write_bytes(b"P5\n2 2\n255\n" + bytes([254, 254, 254, 0]))
+    cases = [
+        ("image: m.pgm\norigin: [0, 0, 0]\n", "resolution", None),
+        ("image: m.pgm\nresolution: -1\norigin: [0, 0, 0]\n", "resolution", -1),
+        ("image: m.pgm\nresolution: 0.05\norigin: zero\n", "origin", "zero"),
+        ("image: gone.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n", "image", "gone.pgm"),
+        ("image: m.pgm\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 2\n", "negate", 2),
+        ("image: m.pgm\nresolution: 0.05\norigin: [0, 0, 0]\nfree_thresh: 0.9\n",
+         "free_thresh", 0.9),
+    ]
+    for text, field, value in cases:
+        y = tmp_path / "m.yaml"
+        y.write_text(text)
+        with pytest.raises(ConfigError) as ei:
+            read_ros_yaml(y)
+        assert (ei.value.field, ei.value.value) == (field, value), text
+        assert str(y) in str(ei.value)
+
+
+def test_bare_ros_yaml_gets_defaults_and_an_automatic_source():
+    cfg, wm = map_from_path(CONFIGS / "maps" / "office.yaml")
+    assert cfg.map.ros_map.endswith("office.yaml") and cfg.world.mode == "lockstep"
+    assert len(wm.sources) == 1 and wm.info.get("auto_source")
+    assert wm.is_free(wm.sources[:, :2], margin=0.5).all()   # well clear of every wall
