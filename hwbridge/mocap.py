@@ -17,7 +17,8 @@ mocap frame (m), unit quaternion (x, y, z, w), receipt time) through
     maps them and is tested with stand-in objects of the same shape (no hardware here).
 
 Receipt times are ``time.monotonic()`` seconds of this process; source times are the
-source's own clock (Unix seconds for the Zenoh and scripted sources).
+source's own clock (the publisher's monotonic clock for fake robots, this process's for
+the scripted and libmotioncapture sources).
 """
 from __future__ import annotations
 
@@ -248,7 +249,7 @@ class ScriptedMocapSource:
             "rename", "seed", "height"}
 
     def __init__(self, spec: dict, up_axis: str = "z", transform: Transform2D | None = None,
-                 clock: Callable[[], float] = time.monotonic, wall: Callable[[], float] = time.time):
+                 clock: Callable[[], float] = time.monotonic, wall: Callable[[], float] = time.monotonic):
         what = "hwbridge.mocap"
         extra = set(spec) - self.KEYS
         if extra:
@@ -378,7 +379,8 @@ class LibMotionCaptureSource:
         while not self._stop.is_set():
             try:
                 self.mc.waitForNextFrame()
-                samples = samples_from_rigid_bodies(self.mc.rigidBodies, time.time(), time.monotonic())
+                now = time.monotonic()
+                samples = samples_from_rigid_bodies(self.mc.rigidBodies, now, now)
             except Exception as e:  # the SDK lost the connection
                 self.error = f"{e.__class__.__name__}: {e}"
                 time.sleep(0.5)
