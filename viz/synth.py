@@ -138,7 +138,7 @@ class Scenario:
         for k, e in enumerate(edges):
             if ntri[e] <= 1:
                 mid = (pos[e[0]] + pos[e[1]]) / 2
-                (obstacle if _wall_dist(mid) < 0.65 * self.rv else frontier).append(k)
+                (obstacle if _wall_dist(mid) < 0.5 * self.rv else frontier).append(k)
         redundant = [100 + 2] if cycle >= 8 and 2 in ids else []
         flat = [100 + v for e in edges for v in e]
         return m.Complex(cycle=cycle, t=t, epoch=0, vertices=verts, occupants=list(ids),
