@@ -25,8 +25,7 @@ boundary = [[0, 0], [3, 0], [3, 2], [0, 2]]
 sources = [{x = 0.5, y = 1.0, theta = 0.0}]
 """
 
-CMD_CONFIG = MAP + """
-name = "hwb_cmd"
+CMD_CONFIG = 'name = "hwb_cmd"\n' + MAP + """
 [hwbridge]
 mocap = {type = "zenoh"}
 up_axis = "y"
@@ -172,8 +171,7 @@ def test_commands_deadman_geofence_ros2_and_odometry(procs, router, zargs, tmp_p
         assert "FINAL fake-robot" in p.output()
 
 
-SILENCE_CONFIG = MAP + """
-name = "hwb_silence"
+SILENCE_CONFIG = 'name = "hwb_silence"\n' + MAP + """
 [hwbridge]
 deadman_s = 0.3
 silence_s = 0.5
