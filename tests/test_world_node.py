@@ -248,3 +248,11 @@ def test_lockstep_same_seed_same_trajectories(procs, router, tmp_path):
              for k in range(3)]
     assert min(moved) > 0.1
     assert last["theta"][1] != 0.0 and last["theta"][0] == 0.0    # only the diffdrive turns
+
+
+def test_bad_config_exits_2_naming_the_field(procs, tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[map]\nboundary = [[0, 0], [4, 0], [4, 3], [0, 3]]\n[world]\nmode = "warp"\n')
+    w = procs.swarmcover("world", bad, "--connect", "tcp/127.0.0.1:9")
+    assert w.wait(timeout=30) == 2
+    assert f"{bad}: [world] mode = 'warp'" in w.output()

@@ -1,8 +1,8 @@
 """pymunk dynamics of the swarm: disk robots, static walls, velocity commands.
 
 World frame, metres, seconds, radians. Every robot is a dynamic disk (mass 1 kg,
-frictionless, inelastic); walls are static segments. Each physics substep the commanded
-velocity is written into every body (a stiff velocity controller) and pymunk resolves the
+frictionless, inelastic); walls are static segments. Each physics substep drives every body
+to its commanded velocity (a stiff velocity controller, see below) and pymunk resolves the
 contacts, so robots push each other and slide along walls.
 
 Kinds:
@@ -14,6 +14,12 @@ Kinds:
 Optional actuation noise (relative sigma) multiplies virtual robots' speeds, drawn from the
 run's seeded generator in robot-id order. Bodies are stepped and read in batch
 (pymunk.batch); iteration is always in sorted robot-id order, so runs are deterministic.
+
+Velocity control: chipmunk integrates positions with the previous substep's solved
+velocities before it integrates forces and solves contacts, so writing the velocity directly
+would tunnel through walls. Instead each substep applies the force that brings the body's
+velocity to the command within the substep; the contact solver then stops it at walls and
+robots. A command therefore takes effect one substep (dt/substeps) late.
 """
 from __future__ import annotations
 
@@ -23,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import pymunk
 import pymunk.batch as pb
+from scipy.spatial import cKDTree
 
 from .maps import WorldMap
 
@@ -97,11 +104,12 @@ class Physics:
         gap = max(1e-3, 0.05 * r)
         others = np.array([(b.body.position.x, b.body.position.y)
                            for k, b in self.robots.items() if k != exclude]).reshape(-1, 2)
+        tree = cKDTree(others) if len(others) else None
         x0, y0, x1, y1 = self.wm.bounds
         reach = 4 * r
-        step = 0.5 * r
         limit = math.hypot(x1 - x0, y1 - y0) + reach
         while True:
+            step = max(0.5 * r, reach / 40)          # at most ~6,000 candidates per round
             n = int(math.ceil(reach / step))
             g = np.arange(-n, n + 1) * step
             gx, gy = np.meshgrid(g, g * (math.sqrt(3) / 2))
@@ -110,12 +118,11 @@ class Physics:
             d = np.hypot(c[:, 0] - x, c[:, 1] - y)
             c = np.concatenate([[[x, y]], c[d <= reach]])
             d = np.hypot(c[:, 0] - x, c[:, 1] - y)
-            order = np.argsort(d, kind="stable")
-            c = c[order]
+            c = c[np.argsort(d, kind="stable")]
             ok = np.ones(len(c), bool)
-            if len(others):
-                dd = np.hypot(c[:, None, 0] - others[None, :, 0], c[:, None, 1] - others[None, :, 1])
-                ok &= dd.min(1) >= 2 * r + gap
+            if tree is not None:
+                dist, _ = tree.query(c, k=1)
+                ok &= dist >= 2 * r + gap
             if ok.any():
                 idx = np.nonzero(ok)[0]
                 free = self.wm.is_free(c[idx], margin=r + gap)
