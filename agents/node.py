@@ -86,12 +86,14 @@ def resolve_params(args, session, keys: Keys, stop: Shutdown,
         except OSError as e:
             raise ParamError(f"--run-config {path}: {e}") from None
         params = from_toml_text(text, str(path))
+        log.info("parameters from %s", path)
     elif args.info_timeout > 0:
         info = query_world_info(session, keys, args.info_timeout, stop, log)
         if info is None:
             log.info("no world/info within %.1f s: default parameters", args.info_timeout)
         elif info.config:
             params = from_toml_text(info.config, "world/info config")
+            log.info("parameters from the world/info config of run %r", info.name)
         else:
             params = params.replace(rv=info.rv, radius=info.robot_radius, dt=info.dt)
     if args.kind:
@@ -123,6 +125,8 @@ class AgentNode:
         self.last_pose: list[float] = []
         self.last_t = 0.0
         self.last_status = 0.0
+        self.last_tick: int | None = None
+        self.last_cmd: bytes | None = None
 
     def open(self) -> None:
         s, k = self.session, self.keys
@@ -197,6 +201,11 @@ class AgentNode:
             self.tick(sense)
 
     def tick(self, sense: Sense) -> None:
+        if sense.tick == self.last_tick and self.last_cmd is not None:
+            # the world re-sent a tick we answered (lost reply?): answer again, don't re-step
+            self.pub_cmd.put(self.last_cmd)
+            self.skipped += 1
+            return
         try:
             cmd = self.beh.step(sense)
         except Exception:  # a bug must not take the robot down: stop and say so once
@@ -207,7 +216,9 @@ class AgentNode:
         out = CmdVel(robot=self.rid, tick=sense.tick)
         if cmd is not None:
             out.vx, out.vy, out.wz = cmd.vx, cmd.vy, cmd.wz
-        self.pub_cmd.put(out.encode())
+        self.last_cmd = out.encode()
+        self.last_tick = sense.tick
+        self.pub_cmd.put(self.last_cmd)
         self.ticks += 1
         self.last_t = sense.t
         if self.beh.changed or self.ticks % self.p.status_every == 0:
@@ -260,8 +271,8 @@ def main(argv: list[str] | None = None) -> int:
                 if time.monotonic() - node.last_status > HEARTBEAT_S:
                     node.publish_status()
             node.stop_robot()
-            log.info("robot %d stopped: %d ticks, %d skipped, %d invalid messages, "
-                     "%d task errors", args.id, node.ticks, node.skipped,
+            log.info("robot %d stopped: %d ticks, %d skipped or repeated, %d invalid messages, "
+                     "%d behaviour errors", args.id, node.ticks, node.skipped,
                      node.rx.invalid_total, node.errors)
         finally:
             if node is not None:

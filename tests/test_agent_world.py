@@ -1,0 +1,198 @@
+"""An agent process against the real world process (pymunk, emulated camera) over Zenoh:
+hold records a vertex, a test drive takes the robot away, goto brings it back to the
+recorded vertex within tolerance; the agent reads its parameters from world/info."""
+from __future__ import annotations
+
+import math
+import signal
+import threading
+import time
+
+import pytest
+
+from bus.keys import Keys
+from bus.messages import Status, Task, Truth, decode
+from procs import client_session
+
+pytestmark = pytest.mark.timeout(150)
+
+CONFIG = """
+name = "agent_test"
+rv = 1.0
+
+[map]
+boundary = [[0, 0], [4, 0], [4, 3], [0, 3]]
+sources = [{x = 0.5, y = 1.5, theta = 0.0}]
+
+[robots]
+radius = 0.06
+kind = "holonomic"
+v_max = 0.5
+
+[sensing]
+noise_deg = 0.5
+n_touch = 8
+
+[world]
+dt = 0.05
+mode = "lockstep"
+seed = 3
+spawn = [
+  {robot = 0, pose = [2.0, 1.5, 0.0]},
+  {robot = 1, pose = [2.8, 1.5, 0.0]},
+  {robot = 2, pose = [1.6, 2.19, 0.0]},
+  {robot = 3, pose = [1.6, 0.81, 0.0]},
+]
+
+[agent]
+arrive_ticks = 8
+"""
+
+
+class Latest:
+    def __init__(self, session, key, typ):
+        self.msgs = []
+        self.lock = threading.Lock()
+
+        def cb(sample):
+            try:
+                m = decode(sample.payload.to_bytes(), typ)
+            except Exception:
+                return
+            with self.lock:
+                self.msgs.append(m)
+        self.sub = session.declare_subscriber(key, cb)
+
+    def all(self):
+        with self.lock:
+            return list(self.msgs)
+
+    def wait(self, pred, timeout):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            for m in reversed(self.all()):
+                if pred(m):
+                    return m
+            time.sleep(0.05)
+        raise AssertionError(f"timed out; last: {self.all()[-1:]}")
+
+
+def test_agent_returns_to_a_recorded_vertex_in_the_real_world(procs, zargs, router, tmp_path):
+    swarm = zargs[zargs.index("--swarm") + 1]
+    keys = Keys(swarm)
+    cfg = tmp_path / "run.toml"
+    cfg.write_text(CONFIG)
+    world = procs.swarmcover("world", cfg, *zargs)
+    world.wait_line("READY world", timeout=60)
+    agent = procs.swarmcover("agent", "--id", 0, *zargs)
+    agent.wait_line("READY agent 0", timeout=40)
+    s = client_session(router, swarm)
+    try:
+        status = Latest(s, keys.status(0), Status)
+        truth = Latest(s, keys.truth, Truth)
+
+        def send_until(task, pred, timeout):
+            """Put the task (again, idempotently) until a Status satisfies pred."""
+            end = time.monotonic() + timeout
+            while time.monotonic() < end:
+                s.put(keys.task(0), task.encode())
+                try:
+                    return status.wait(pred, 2.0)
+                except AssertionError:
+                    continue
+            raise AssertionError(f"task {task.task_id} never finished: {status.all()[-1:]}")
+
+        st = send_until(Task(task_id=1, robot=0, kind="hold", vertex=0),
+                        lambda m: m.task_id == 1 and m.task_state == "done", 30)
+        assert sorted(st.nbr_ids) == [1, 2, 3]
+        recorded = dict(zip(st.nbr_ids, st.nbr_bearings))
+        assert abs(recorded[1]) < math.radians(2)          # the world frame is the body frame
+        home = next(p for p in reversed(truth.all()) if 0 in p.ids)
+        k = home.ids.index(0)
+        home_xy = (home.x[k], home.y[k])
+
+        send_until(Task(task_id=2, robot=0, kind="test_drive", vertex=0, direction=-2.0,
+                        distance=0.3), lambda m: m.task_id == 2 and m.task_state == "done", 40)
+        ids = list(recorded)
+        st = send_until(Task(task_id=3, robot=0, kind="goto", vertex=0, landmarks=ids,
+                             bearings=[recorded[i] for i in ids], timeout_s=60),
+                        lambda m: m.task_id == 3 and m.task_state != "running"
+                        and m.state == "holding", 60)
+        assert st.task_state == "done", st
+        time.sleep(0.5)
+        last = truth.all()[-1]
+        k = last.ids.index(0)
+        err = math.hypot(last.x[k] - home_xy[0], last.y[k] - home_xy[1])
+        assert err < 0.04, (err, home_xy, (last.x[k], last.y[k]))
+        status.sub.undeclare()
+        truth.sub.undeclare()
+    finally:
+        s.close()
+    agent.signal(signal.SIGINT)
+    assert agent.wait(15) == 0
+    assert "parameters from the world/info config of run 'agent_test'" in agent.output()
+    assert "invalid messages" in agent.output()
+
+
+def _run_once(procs, router, zargs, swarm, cfg_text, tmp_path, garbage: bool):
+    """One lockstep run of 150 ticks: returns {tick: (vx, vy, wz)} of robot 0."""
+    import random
+
+    from bus.messages import CmdVel, Pose
+    keys = Keys(swarm)
+    z = ["--connect", router, "--swarm", swarm]
+    cfg = tmp_path / f"{swarm}.toml"
+    cfg.write_text(cfg_text)
+    agent = procs.swarmcover("agent", "--id", 0, "--run-config", cfg, *z)
+    agent.wait_line("READY agent 0", timeout=40)
+    s = client_session(router, swarm)
+    cmds = Latest(s, keys.cmd_vel(0), CmdVel)
+    stop = threading.Event()
+    try:
+        task = Task(task_id=1, robot=0, kind="goto", vertex=0, landmarks=[1, 2, 3],
+                    bearings=[0.3, 2.2, -2.0])
+        end = time.monotonic() + 20
+        while "task 1: goto" not in agent.output() and time.monotonic() < end:
+            s.put(keys.task(0), task.encode())
+            time.sleep(0.2)
+        assert "task 1: goto" in agent.output()
+
+        def junk():
+            rng = random.Random(5)
+            while not stop.is_set():
+                s.put(keys.odom(0), Pose(robot=0, x=rng.uniform(-9, 9), y=rng.uniform(-9, 9),
+                                         theta=rng.uniform(-3, 3), source="odom").encode())
+                s.put(keys.odom(0), b"\xa5junk")
+                time.sleep(0.02)
+        th = threading.Thread(target=junk, daemon=True)
+        if garbage:
+            th.start()
+        world = procs.swarmcover("world", cfg, "--max-ticks", 150, *z)
+        assert world.wait(90) == 0, world.output()
+        stop.set()
+        if garbage:
+            th.join(5)
+        time.sleep(0.3)
+        out = {c.tick: (c.vx, c.vy, c.wz) for c in cmds.all() if c.tick >= 0}
+        cmds.sub.undeclare()
+    finally:
+        stop.set()
+        s.close()
+    agent.signal(signal.SIGTERM)
+    assert agent.wait(15) == 0
+    return out, agent.output()
+
+
+def test_pose_telemetry_garbage_or_absent_changes_nothing(procs, zargs, router, tmp_path):
+    """Same seed, same lockstep world: one run without any odometry (pose_rate_hz = 0), one
+    with the world's odometry plus a stream of garbage poses and undecodable bytes. The
+    agent's command streams must be identical, tick for tick."""
+    swarm = zargs[zargs.index("--swarm") + 1]
+    absent = CONFIG.replace('seed = 3', 'seed = 3\npose_rate_hz = 0')
+    present = CONFIG.replace('seed = 3', 'seed = 3\npose_rate_hz = 20')
+    a, _ = _run_once(procs, router, zargs, swarm + "a", absent, tmp_path, garbage=False)
+    b, out_b = _run_once(procs, router, zargs, swarm + "b", present, tmp_path, garbage=True)
+    assert set(range(150)) <= set(a), sorted(a)[:5]
+    assert any(v != (0.0, 0.0, 0.0) for v in a.values())
+    assert a == b
+    assert "dropping invalid message on" in out_b and "/odom" in out_b
