@@ -20,6 +20,7 @@ Times: ``log_time`` is the wall clock (ns since the Unix epoch) at receipt in th
 from __future__ import annotations
 
 import argparse
+import atexit
 import dataclasses
 import json
 import logging
@@ -246,6 +247,9 @@ class Recorder:
         self.have_world_info = False
         self.deletes_skipped = 0
         self.errors = 0
+        self._n = 0       # messages written (read from other threads: plain ints only)
+        self._nkeys = 0
+        self._stopped = False
 
     # -- callbacks: stamp and enqueue only
     def _on_sample(self, sample) -> None:
@@ -277,6 +281,7 @@ class Recorder:
             self._want_info.set()
         self._thread = threading.Thread(target=self._run, name="recorder-writer", daemon=True)
         self._thread.start()
+        atexit.register(self.stop)  # a forgotten stop() still leaves a readable file
         return self
 
     def _excluded(self, key: str) -> bool:
@@ -309,6 +314,8 @@ class Recorder:
             return
         try:
             self._sink.write(key, payload, t, kind=kind, publish_time_ns=pub)
+            self._n += 1
+            self._nkeys = len(self._sink.counts)
         except Exception as e:
             self.errors += 1
             if self.errors <= 3:
@@ -333,6 +340,10 @@ class Recorder:
 
     def stop(self) -> dict:
         """Stop recording, finish the file; returns :meth:`stats`. Idempotent."""
+        if self._stopped:
+            return self.stats()
+        self._stopped = True
+        atexit.unregister(self.stop)
         for s in self._subs:
             try:
                 s.undeclare()
@@ -356,7 +367,13 @@ class Recorder:
 
     @property
     def messages(self) -> int:
-        return sum(self._sink.counts.values()) if self._sink else 0
+        """Messages written so far (safe to read from any thread)."""
+        return self._n
+
+    @property
+    def keys(self) -> int:
+        """Distinct keys written so far (safe to read from any thread)."""
+        return self._nkeys
 
     def __enter__(self) -> "Recorder":
         return self.start()
@@ -423,7 +440,7 @@ def main(argv: list[str] | None = None) -> int:
             end = None if args.duration is None else time.monotonic() + args.duration
             with Progress(label="record", unit="msg", enabled=not args.quiet) as prog:
                 while not stop.wait(0.2):
-                    prog.set(rec.messages, note=f"{len(rec._sink.counts)} keys")
+                    prog.set(rec.messages, note=f"{rec.keys} keys")
                     if end is not None and time.monotonic() >= end:
                         break
                 stats = rec.stop()

@@ -222,3 +222,31 @@ def test_recorded_run_replays_into_topics_echo_with_identical_payloads(router, z
     robots_seen = {int(key.rsplit("/", 1)[1]) for key, _, kind in seen_tokens.drain()
                    if str(kind).endswith("PUT")}
     assert robots_seen == {int(key.rsplit("/", 1)[1]) for key, d in tokens if "robot" in key}
+
+
+def test_recorder_forgotten_stop_still_leaves_a_readable_file(router, tmp_path):
+    """A process that exits without Recorder.stop() (an error path) still finishes the file."""
+    import subprocess
+    out = tmp_path / "forgot.mcap"
+    script = f"""
+import sys, time
+sys.path.insert(0, 'tests')
+from procs import client_session
+from swarmcover.record import Recorder
+from bus import messages as m
+s = client_session({router!r}, 'forgot')
+rec = Recorder(s, 'sc/forgot/**', {str(out)!r}).start()
+time.sleep(0.3)
+for i in range(5):
+    s.put('sc/forgot/demo', m.Demo(seq=i).encode())
+t = time.monotonic() + 10
+while rec.messages < 5 and time.monotonic() < t:
+    time.sleep(0.02)
+s.close()
+print('EXIT', rec.messages, flush=True)
+"""
+    from procs import ROOT
+    r = subprocess.run([sys.executable, "-c", script], cwd=str(ROOT), capture_output=True,
+                       text=True, timeout=60)
+    assert "EXIT 5" in r.stdout, r.stdout + r.stderr
+    assert [r.data for r in read_messages(out)] == [m.Demo(seq=i).encode() for i in range(5)]
