@@ -127,7 +127,7 @@ class McapSink:
             raise FileNotFoundError(f"output {self.path}: directory {self.path.parent} does not exist")
         self._f = open(self.path, "wb")
         self._w = Writer(self._f, compression=CompressionType.ZSTD)
-        self._w.start(profile=PROFILE, library=f"swarmcover-record/mcap")
+        self._w.start(profile=PROFILE, library="swarmcover-record/mcap")
         if metadata:
             self._w.add_metadata("swarmcover", {str(k): str(v) for k, v in metadata.items()})
         self._schemas: dict[str, int] = {}
