@@ -146,3 +146,14 @@ def test_segments_intersect_basic():
     assert segments_intersect(p0, p1, np.array([[1.0, -1.0]]), np.array([[1.0, 1.0]]))[0]
     assert not segments_intersect(p0, p1, np.array([[3.0, -1.0]]), np.array([[3.0, 1.0]]))[0]
     assert segments_intersect(p0, p1, np.array([[1.0, 0.0]]), np.array([[1.0, 1.0]]))[0]
+
+
+def test_map_from_world_info_round_trip():
+    from bus.messages import WorldInfo, decode
+    from world.maps import map_from_info, map_from_path
+    cfg, wm = map_from_path("configs/structured.toml")
+    info = decode(WorldInfo(name=wm.name, rv=1.0, dt=0.05, **wm.info_fields()).validate().encode())
+    wm2 = map_from_info(info)
+    assert np.array_equal(wm2.boundary, wm.boundary) and len(wm2.obstacles) == 4
+    assert wm2.free_area == wm.free_area and np.array_equal(wm2.sources, wm.sources)
+    assert np.array_equal(wm2.walls, wm.walls)

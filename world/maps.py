@@ -703,3 +703,14 @@ def map_from_path(path) -> tuple[RunConfig, WorldMap]:
     """(config, map) from a TOML config or a bare ROS YAML -- no Zenoh, for reports."""
     cfg = load_config(path)
     return cfg, build_map(cfg)
+
+
+def map_from_info(info) -> WorldMap:
+    """A WorldMap from a WorldInfo message (e.g. ``session.get(keys.world_info)``), for
+    processes without the config files (viewers, reports on another host)."""
+    b = np.asarray(info.boundary, float).reshape(-1, 2)
+    obs = [np.asarray(o, float).reshape(-1, 2) for o in info.obstacles]
+    wm = WorldMap(info.name, b, obs, np.asarray(info.sources, float).reshape(-1, 3),
+                  _disjoint(b, obs))
+    wm._cache["free_area"] = float(info.free_area)
+    return wm
