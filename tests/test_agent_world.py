@@ -196,3 +196,65 @@ def test_pose_telemetry_garbage_or_absent_changes_nothing(procs, zargs, router, 
     assert any(v != (0.0, 0.0, 0.0) for v in a.values())
     assert a == b
     assert "dropping invalid message on" in out_b and "/odom" in out_b
+
+
+def test_diffdrive_agent_returns_with_frame_alignment(procs, zargs, router, tmp_path):
+    """A differential-drive body (it rotates): the goto carries ref_offsets (heading of the
+    recording frame minus each landmark's heading; the test plays the coordinator and takes
+    the headings from ground truth) and the agent aligns frames from mutual bearings."""
+    swarm = zargs[zargs.index("--swarm") + 1]
+    keys = Keys(swarm)
+    cfg = tmp_path / "dd.toml"
+    cfg.write_text(CONFIG.replace("{robot = 0, pose = [2.0, 1.5, 0.0]}",
+                                  '{robot = 0, pose = [2.0, 1.5, 0.7], kind = "diffdrive"}'))
+    world = procs.swarmcover("world", cfg, *zargs)
+    world.wait_line("READY world", timeout=60)
+    agent = procs.swarmcover("agent", "--id", 0, "--kind", "diffdrive", *zargs)
+    agent.wait_line("READY agent 0 kind=diffdrive", timeout=40)
+    s = client_session(router, swarm)
+    try:
+        status = Latest(s, keys.status(0), Status)
+        truth = Latest(s, keys.truth, Truth)
+
+        def send_until(task, pred, timeout):
+            end = time.monotonic() + timeout
+            while time.monotonic() < end:
+                s.put(keys.task(0), task.encode())
+                try:
+                    return status.wait(pred, 2.0)
+                except AssertionError:
+                    continue
+            raise AssertionError(f"task {task.task_id} never finished: {status.all()[-1:]}")
+
+        st = send_until(Task(task_id=1, robot=0, kind="hold", vertex=0),
+                        lambda m: m.task_id == 1 and m.task_state == "done", 30)
+        recorded = dict(zip(st.nbr_ids, st.nbr_bearings))
+        assert sorted(recorded) == [1, 2, 3]
+        home = truth.all()[-1]
+        k = home.ids.index(0)
+        home_xy, home_th = (home.x[k], home.y[k]), home.theta[k]
+        assert abs(home_th - 0.7) < 0.05
+        # body-frame direction -0.7 at heading 0.7: world +x, staying within rv of all three
+        send_until(Task(task_id=2, robot=0, kind="test_drive", vertex=0, direction=-0.7,
+                        distance=0.2), lambda m: m.task_id == 2 and m.task_state == "done", 40)
+        away = truth.all()[-1]
+        k = away.ids.index(0)
+        assert abs(away.theta[k] - home_th) > 0.5          # it turned to drive
+        ids = list(recorded)
+        st = send_until(Task(task_id=3, robot=0, kind="goto", vertex=0, landmarks=ids,
+                             bearings=[recorded[i] for i in ids],
+                             ref_offsets=[home_th - 0.0 for _ in ids], timeout_s=60),
+                        lambda m: m.task_id == 3 and m.task_state != "running"
+                        and m.state == "holding", 60)
+        assert st.task_state == "done", (st.reason, st)
+        time.sleep(0.3)
+        last = truth.all()[-1]
+        k = last.ids.index(0)
+        err = math.hypot(last.x[k] - home_xy[0], last.y[k] - home_xy[1])
+        assert err < 0.05, (err, home_xy, (last.x[k], last.y[k]))
+        status.sub.undeclare()
+        truth.sub.undeclare()
+    finally:
+        s.close()
+    agent.signal(signal.SIGINT)
+    assert agent.wait(15) == 0
