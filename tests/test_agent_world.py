@@ -258,3 +258,53 @@ def test_diffdrive_agent_returns_with_frame_alignment(procs, zargs, router, tmp_
         s.close()
     agent.signal(signal.SIGINT)
     assert agent.wait(15) == 0
+
+
+def test_deploy_with_scale_correction_in_the_real_world(procs, zargs, router, tmp_path):
+    """Deploy to the assumed-geometry apex of a 0.6 m edge, then scale correction pushes the
+    robot out until a link breaks and backs it up until both are back: it ends just inside
+    rv of both references."""
+    swarm = zargs[zargs.index("--swarm") + 1]
+    keys = Keys(swarm)
+    cfg = tmp_path / "deploy.toml"
+    spawn = ('spawn = [\n  {robot = 0, pose = [1.2, 1.5, 0.0]},\n'
+             '  {robot = 1, pose = [1.0, 1.2, 0.0]},\n  {robot = 2, pose = [1.0, 1.8, 0.0]},\n]')
+    text = CONFIG[:CONFIG.index("spawn = [")] + spawn + "\n"
+    cfg.write_text(text)
+    world = procs.swarmcover("world", cfg, *zargs)
+    world.wait_line("READY world", timeout=60)
+    agent = procs.swarmcover("agent", "--id", 0, *zargs)
+    agent.wait_line("READY agent 0", timeout=40)
+    s = client_session(router, swarm)
+    try:
+        status = Latest(s, keys.status(0), Status)
+        truth = Latest(s, keys.truth, Truth)
+        apex = (1.0 + 0.6 * math.sqrt(3) / 2, 1.5)
+        bearings = [math.atan2(1.2 - apex[1], 1.0 - apex[0]),
+                    math.atan2(1.8 - apex[1], 1.0 - apex[0])]
+        task = Task(task_id=1, robot=0, kind="deploy", vertex=9, landmarks=[1, 2],
+                    bearings=bearings, scale_correct=True, timeout_s=60)
+        end = time.monotonic() + 90
+        st = None
+        while time.monotonic() < end:
+            s.put(keys.task(0), task.encode())
+            try:
+                st = status.wait(lambda m: m.task_id == 1 and m.task_state != "running", 2.0)
+                break
+            except AssertionError:
+                continue
+        assert st is not None and st.task_state == "done", st
+        assert any(m.state == "deploying" for m in status.all())
+        time.sleep(0.3)
+        last = truth.all()[-1]
+        k = last.ids.index(0)
+        d1 = math.hypot(last.x[k] - 1.0, last.y[k] - 1.2)
+        d2 = math.hypot(last.x[k] - 1.0, last.y[k] - 1.8)
+        assert 0.9 < max(d1, d2) <= 1.0, (d1, d2)
+        assert abs(last.y[k] - 1.5) < 0.05
+        status.sub.undeclare()
+        truth.sub.undeclare()
+    finally:
+        s.close()
+    agent.signal(signal.SIGINT)
+    assert agent.wait(15) == 0
