@@ -1,0 +1,70 @@
+"""End to end: `swarmcover run configs/mixed.toml` covers the small room with two stand-in
+live robots (fake-robot processes behind the hardware bridge) among virtual ones, and the
+live robots' twins track them within a stated bound.
+
+Bound (see bench/hwbridge.py for the measured numbers): with feed-forward on, as in
+configs/mixed.toml, twin position error mean < 5 cm and p95 < 15 cm per live robot.
+
+Skipped until the whole pipeline exists (swarmcover/run.py and a coordinator planner that
+no longer raises NotImplementedError). The run is real time: a few minutes of wall time.
+"""
+from __future__ import annotations
+
+import inspect
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from procs import free_port
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _pipeline_missing() -> str | None:
+    try:
+        import swarmcover.run  # noqa: F401
+        from coordinator import planner
+    except ImportError as e:
+        return f"pipeline not there yet: {e}"
+    try:
+        if "raise NotImplementedError" in inspect.getsource(planner.plan_cycle):
+            return "coordinator planner not implemented yet"
+    except (AttributeError, OSError, TypeError):
+        pass
+    return None
+
+
+pytestmark = [pytest.mark.timeout(420),
+              pytest.mark.skipif(_pipeline_missing() is not None,
+                                 reason=_pipeline_missing() or "")]
+
+
+def test_mixed_run_covers_with_live_stand_ins(procs, tmp_path):
+    out = tmp_path / "run"
+    run = procs.swarmcover("run", ROOT / "configs" / "mixed.toml", "--out", out,
+                           "--port", free_port(), "--quiet", "--wall-timeout", "300")
+    rc = run.wait(360)
+    logs = out / "logs"
+    summary = json.loads((out / "summary.json").read_text())
+    assert rc == 0 and summary["certified"], run.output()[-3000:]
+
+    # both live robots were spawned as twins and took part
+    world_log = (logs / "world.log").read_text()
+    for rid in (1, 2):
+        assert re.search(rf"spawned robot {rid} \(diffdrive, live twin\)", world_log), world_log[-2000:]
+    for rid in (1, 2):
+        fin = (logs / f"fake-robot-{rid}.log").read_text()
+        m = re.search(r"FINAL fake-robot \d+ .* commands=(\d+)", fin)
+        assert m and int(m.group(1)) > 0
+
+    # the bridge's own report: twins tracked the stand-ins
+    line = next(ln for ln in (logs / "hwbridge.log").read_text().splitlines()
+                if ln.startswith("SUMMARY "))
+    rep = json.loads(line.split("SUMMARY ", 1)[1])
+    for rid in ("1", "2"):
+        err = rep["robots"][rid]["position_error_m"]
+        assert err["n"] > 100
+        assert err["mean"] < 0.05 and err["p95"] < 0.15, rep["robots"][rid]
+    assert rep["refused_commands"] == 0
