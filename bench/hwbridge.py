@@ -39,7 +39,7 @@ CLK = os.sysconf("SC_CLK_TCK")
 
 from hwbridge.fake_robot import DiffDriveSim, DriveParams  # noqa: E402
 from hwbridge.frames import wrap  # noqa: E402
-from hwbridge.metrics import TrackLog, summary  # noqa: E402
+from hwbridge.metrics import TrackLog  # noqa: E402
 from hwbridge.twin import TwinGains, VelocityEstimator, integrate, twin_command  # noqa: E402
 
 
