@@ -1,0 +1,491 @@
+"""Fence detection: frontier edges K and obstacle edges O (spec section 3).
+
+Everything is computed from the complex, the body-frame bearings and the touch flags
+stored in it: no positions.
+
+Sides. For an edge with node ids u < v, side sigma = +1 is the side counter-clockwise
+from v as seen by u (sign of theta^u_{v k} for an apex k on that side); seen from v the
+same physical side has sign -sigma. All sides in the results use this canonical
+orientation.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from .angles import circular_mean, wrap, wrap_array
+from .complex import Complex
+from .params import TopologyParams
+
+__all__ = ["Deployment", "FenceSide", "FenceEdge", "Fence", "detect_fence"]
+
+_I64 = np.int64
+_PI3 = math.pi / 3.0
+
+
+@dataclass(frozen=True)
+class Deployment:
+    """Where a robot at ``vertex`` would send a new robot.
+
+    bearing: direction (rad) in the body frame of the robot at ``vertex``.
+    edge: fence edge (u, v) node ids with u < v, or None (single file / isolated robot).
+    sigma: canonical open side of ``edge`` (+1/-1), 0 when edge is None.
+    offset: theta_new, the signed angle (rad) from the edge direction to ``bearing``.
+    clearance: smallest |angle| (rad) between ``bearing`` and any neighbour bearing
+      (pi when the robot has no neighbour).
+    kind: 'edge', 'single_file' or 'isolated'.
+    """
+
+    vertex: int
+    bearing: float
+    edge: tuple[int, int] | None
+    sigma: int
+    offset: float
+    clearance: float
+    kind: str
+
+
+@dataclass(frozen=True)
+class FenceSide:
+    """One open side of a fence edge.
+
+    kind: 'frontier' or 'obstacle'. reason: 'open', 'both_touch', 'convex_corner' or
+    'test_drive'. deploy_u / deploy_v: deployment bearings (rad) in the body frames of u
+    and v (None for obstacle sides). offset_u / offset_v: theta_new at u and at v.
+    """
+
+    sigma: int
+    kind: str
+    reason: str
+    deploy_u: float | None = None
+    deploy_v: float | None = None
+    offset_u: float | None = None
+    offset_v: float | None = None
+
+
+@dataclass(frozen=True)
+class FenceEdge:
+    """A fence edge: node ids u < v, its edge id in the complex, and its open sides."""
+
+    u: int
+    v: int
+    index: int
+    sides: tuple[FenceSide, ...]
+
+    @property
+    def one_sided(self) -> bool:
+        return len(self.sides) == 1
+
+    @property
+    def is_frontier(self) -> bool:
+        return any(s.kind == "frontier" for s in self.sides)
+
+    @property
+    def is_obstacle(self) -> bool:
+        return any(s.kind == "obstacle" for s in self.sides)
+
+
+@dataclass(frozen=True, eq=False)
+class Fence:
+    """Result of :func:`detect_fence`.
+
+    edges: every fence edge (in K or O), by edge id order.
+    frontier / obstacle / exceptions / z: edge ids (into ``Complex.edges``) of K, O,
+      the exception set E, and the one-sided fence edges z (the certificate target).
+    deployments: node id -> deployments available at that robot, best clearance first.
+    frontier_vertices / obstacle_vertices / fence_vertices: node ids.
+    """
+
+    edges: tuple[FenceEdge, ...]
+    frontier: np.ndarray
+    obstacle: np.ndarray
+    exceptions: np.ndarray
+    z: np.ndarray
+    z_raw: np.ndarray
+    z_repair: np.ndarray
+    deployments: Mapping[int, tuple[Deployment, ...]]
+    frontier_vertices: frozenset[int]
+    obstacle_vertices: frozenset[int]
+    fence_vertices: frozenset[int]
+    by_index: Mapping[int, FenceEdge] = field(default_factory=dict)
+
+    @property
+    def done(self) -> bool:
+        """True when there is no frontier left (K empty and no deploying robot)."""
+        return not self.deployments
+
+
+def _sgn(a: float) -> int:
+    return 1 if a > 0.0 else (-1 if a < 0.0 else 0)
+
+
+class _Local:
+    """Per-vertex neighbour data, built lazily from the complex CSR."""
+
+    def __init__(self, cx: Complex):
+        self.indptr = cx.adjacency[0]
+        self.nbr = cx.adjacency[1]
+        self.eid = cx.adjacency[2]
+        self.brg = cx.adjacency[3]
+        self._d: dict[int, dict[int, float]] = {}
+
+    def bearings(self, p: int) -> dict[int, float]:
+        d = self._d.get(p)
+        if d is None:
+            a, b = int(self.indptr[p]), int(self.indptr[p + 1])
+            d = dict(zip(self.nbr[a:b].tolist(), self.brg[a:b].tolist()))
+            self._d[p] = d
+        return d
+
+    def nearest_on_side(self, p: int, ref: int, sigma: int):
+        """Neighbour l != ref of p with sign(theta^p_{ref l}) = sigma and the smallest
+        |angle|; returns (l, |angle|) or (None, None)."""
+        d = self.bearings(p)
+        t0 = d[ref]
+        best, best_a = None, None
+        for l, tl in d.items():
+            if l == ref:
+                continue
+            a = wrap(tl - t0)
+            if _sgn(a) == sigma:
+                aa = abs(a)
+                if best_a is None or aa < best_a:
+                    best, best_a = l, aa
+        return best, best_a
+
+    def clearance(self, p: int, bearing: float) -> float:
+        d = self.bearings(p)
+        if not d:
+            return math.pi
+        return min(abs(wrap(bearing - t)) for t in d.values())
+
+    def gap(self, p: int, phi: float):
+        """Neighbours (a, b) bounding the angular gap of p containing bearing phi: a is
+        the nearest clockwise, b the nearest counter-clockwise. (None, None) if none."""
+        d = self.bearings(p)
+        if not d:
+            return None, None
+        a = min(d, key=lambda l: (wrap(phi - d[l]) % (2 * math.pi), l))
+        b = min(d, key=lambda l: (wrap(d[l] - phi) % (2 * math.pi), l))
+        return a, b
+
+    def same_gap(self, p: int, phi: float, psi: float) -> bool:
+        """True if bearings phi and psi of p lie in the same gap between neighbours."""
+        d = self.bearings(p)
+        if not d:
+            return True
+        two_pi = 2 * math.pi
+
+        def clear(a: float, b: float) -> bool:  # no neighbour strictly inside the CCW sweep a -> b
+            span = wrap(b - a) % two_pi
+            return not any(0.0 < wrap(t - a) % two_pi < span for t in d.values())
+
+        return clear(phi, psi) or clear(psi, phi)
+
+
+def _canon(p: int, q: int, side_at_p: int) -> int:
+    """Canonical side of edge {p, q} (local indices) from the side seen at p."""
+    return side_at_p if p < q else -side_at_p
+
+
+def _is_exception(L: _Local, u: int, v: int, sigma: int, apexes) -> bool:
+    """Tightened exception rule (spec 3.2 [P]) for edge (u, v) open on side sigma (at u)."""
+    Bu, Bv = L.bearings(u), L.bearings(v)
+    tu_v, tv_u = Bu[v], Bv[u]
+
+    def beyond(m: int) -> bool:
+        if m in Bu:
+            return _sgn(wrap(Bu[m] - tu_v)) == sigma
+        if m in Bv:
+            return _sgn(wrap(Bv[m] - tv_u)) == -sigma
+        return True
+
+    for k in apexes:
+        Bk = L.bearings(k)
+        tu, tv = Bk[u], Bk[v]
+        whole = wrap(tv - tu)
+        s = _sgn(whole)
+        if s == 0:
+            continue
+        W = abs(whole)
+        wedge = []
+        for m, tm in Bk.items():
+            if m == u or m == v:
+                continue
+            a = wrap(tm - tu) * s
+            if 0.0 < a < W:
+                wedge.append((a, m))
+        if not wedge:
+            continue
+        wedge.sort()
+        # monotone chain u -> m1 -> ... -> v through far-side wedge vertices only
+        reach: list[tuple[float, int]] = [(0.0, u)]
+        for a, m in wedge:
+            if not beyond(m):
+                continue
+            Bm = L.bearings(m)
+            if any(ap < a and p in Bm for ap, p in reach):
+                reach.append((a, m))
+        if any(p in Bv for _, p in reach[1:]):
+            return True
+    return False
+
+
+def _touch_ok(cx: Complex, L: _Local, p: int, tau: float) -> float | None:
+    """The contact bearing of p if it counts as an obstacle contact, else None.
+
+    A contact counts only if no neighbour is visible within tau of its direction.
+    """
+    if not cx.touch[p]:
+        return None
+    tb = float(cx.touch_bearing[p])
+    if math.isnan(tb):
+        return None
+    for t in L.bearings(p).values():
+        if abs(wrap(t - tb)) < tau:
+            return None
+    return tb
+
+
+def _repair_cycle(cx: Complex, z: np.ndarray, band: np.ndarray) -> np.ndarray:
+    """Edge ids to toggle so that ``z`` (edge ids) gets even degree at every vertex.
+
+    Greedy T-join: odd vertices are paired through a multi-source Dijkstra (Voronoi
+    cells); edges inside the band cost 1, others 10.
+    """
+    n, E = cx.n, cx.n_edges
+    zm = np.zeros(E, dtype=bool)
+    zm[z] = True
+    toggled = np.zeros(E, dtype=bool)
+    u, v = cx.edges[:, 0], cx.edges[:, 1]
+    w = np.where(band[u] & band[v], 1.0, 10.0)
+    g = csr_matrix((np.concatenate([w, w]), (np.concatenate([u, v]), np.concatenate([v, u]))), shape=(n, n))
+    for _ in range(8):
+        cur = zm ^ toggled
+        odd = np.nonzero(np.bincount(cx.edges[cur].ravel(), minlength=n) & 1)[0]
+        if odd.size < 2:
+            break
+        dist, pred, src = dijkstra(g, directed=True, indices=odd, min_only=True, return_predecessors=True)
+        ok = np.isfinite(dist[u]) & np.isfinite(dist[v]) & (src[u] != src[v]) & (src[u] >= 0) & (src[v] >= 0)
+        cand = np.nonzero(ok)[0]
+        if cand.size == 0:
+            break
+        cost = dist[u[cand]] + w[cand] + dist[v[cand]]
+        matched: set[int] = set()
+        progress = False
+        for e in cand[np.argsort(cost, kind="stable")].tolist():
+            a, b = int(src[u[e]]), int(src[v[e]])
+            if a in matched or b in matched:
+                continue
+            matched.update((a, b))
+            progress = True
+            toggled[e] ^= True
+            for x in (int(u[e]), int(v[e])):
+                while pred[x] >= 0:
+                    y = int(pred[x])
+                    toggled[int(cx.edge_index(x, y))] ^= True
+                    x = y
+        if not progress:
+            break
+    return np.nonzero(toggled)[0]
+
+
+def detect_fence(
+    cx: Complex,
+    params: TopologyParams | None = None,
+    *,
+    test_drive_failures: Mapping[int, float] | None = None,
+    default_bearing: float = 0.0,
+) -> Fence:
+    """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
+
+    test_drive_failures: node id -> bearing (rad, that robot's body frame) of a test
+      drive that touched an obstacle (spec 3.4(iv)); the fence edges bounding that
+      angular gap at the robot become obstacle edges and its deployments into the gap
+      are dropped.
+    default_bearing: deployment direction (rad, body frame) of a robot with no
+      neighbour at all.
+    """
+    P = params or TopologyParams()
+    E = cx.n_edges
+    te, B = cx.tri_edges, cx.bearings
+    # ---- one-sided test, vectorised over all triangle-edge incidences
+    pos = np.zeros(E, dtype=bool)
+    neg = np.zeros(E, dtype=bool)
+    if cx.n_triangles:
+        ab, ac, bc = te[:, 0], te[:, 1], te[:, 2]
+        s_ab = np.sign(wrap_array(B[ac, 0] - B[ab, 0]))  # apex c of edge ab, at a
+        s_ac = np.sign(wrap_array(B[ab, 0] - B[ac, 0]))  # apex b of edge ac, at a
+        s_bc = np.sign(wrap_array(B[ab, 1] - B[bc, 0]))  # apex a of edge bc, at b
+        e_all = np.concatenate([ab, ac, bc])
+        s_all = np.concatenate([s_ab, s_ac, s_bc])
+        pos[e_all[s_all > 0]] = True
+        neg[e_all[s_all < 0]] = True
+    cand = np.nonzero(~(pos & neg))[0]
+
+    L = _Local(cx)
+    eptr, etri = cx.edge_triangles
+    tri = cx.triangles
+    ids = cx.ids
+    thr = P.corner_threshold
+    n_tri_at = np.diff(cx.vertex_triangles[0])
+
+    exceptions: list[int] = []
+    # per candidate: list of (sigma, offset_u, offset_v) and corner marks
+    open_sides: dict[int, list[list]] = {}
+    marks: dict[tuple[int, int], str] = {}
+    for e in cand.tolist():
+        u, v = int(cx.edges[e, 0]), int(cx.edges[e, 1])
+        sides = ([1] if not pos[e] else []) + ([-1] if not neg[e] else [])
+        if len(sides) == 1:
+            tris = etri[eptr[e]:eptr[e + 1]]
+            apexes = (tri[tris].sum(1) - u - v).tolist()
+            if apexes and _is_exception(L, u, v, sides[0], apexes):
+                exceptions.append(e)
+                continue
+        recs = []
+        for sg in sides:
+            rec = [sg, None, None]
+            ku, gu = L.nearest_on_side(u, v, sg)
+            if ku is not None and gu < thr:
+                marks[(e, sg)] = "convex_corner"
+                e2 = int(cx.edge_index(u, ku))
+                marks.setdefault((e2, _canon(u, ku, -sg)), "convex_corner")
+            else:
+                rec[1] = sg * min(_PI3, (gu if gu is not None else math.pi) / 2.0)
+            kv, gv = L.nearest_on_side(v, u, -sg)
+            if kv is not None and gv < thr:
+                marks[(e, sg)] = "convex_corner"
+                e2 = int(cx.edge_index(v, kv))
+                marks.setdefault((e2, _canon(v, kv, sg)), "convex_corner")
+            else:
+                rec[2] = -sg * min(_PI3, (gv if gv is not None else math.pi) / 2.0)
+            recs.append(rec)
+        open_sides[e] = recs
+
+    # ---- both-touch rule
+    tau = P.tau
+    touch_cache: dict[int, float | None] = {}
+
+    def contact(p: int):
+        if p not in touch_cache:
+            touch_cache[p] = _touch_ok(cx, L, p, tau)
+        return touch_cache[p]
+
+    for e, recs in open_sides.items():
+        u, v = int(cx.edges[e, 0]), int(cx.edges[e, 1])
+        if not (cx.touch[u] and cx.touch[v]):
+            continue
+        ou, ov = contact(u), contact(v)
+        if ou is None or ov is None:
+            continue
+        for rec in recs:
+            sg = rec[0]
+            if _sgn(wrap(ou - L.bearings(u)[v])) == sg and _sgn(wrap(ov - L.bearings(v)[u])) == -sg:
+                marks[(e, sg)] = "both_touch"
+
+    # ---- test-drive failures
+    failed: dict[int, float] = {}
+    if test_drive_failures:
+        for nid, phi in test_drive_failures.items():
+            if int(nid) not in cx:
+                continue
+            p = cx.index_of(int(nid))
+            failed[p] = float(phi)
+            a, b = L.gap(p, float(phi))
+            if a is None:
+                continue
+            for q, side_at_p in ((a, 1), (b, -1)):
+                e2 = int(cx.edge_index(p, q))
+                marks[(e2, _canon(p, q, side_at_p))] = "test_drive"
+
+    # ---- assemble
+    fence_edges: list[FenceEdge] = []
+    K: list[int] = []
+    O: list[int] = []
+    z: list[int] = []
+    deps: dict[int, list[Deployment]] = {}
+    single = (n_tri_at == 0) & (cx.degree > 0)
+    for e, recs in open_sides.items():
+        u, v = int(cx.edges[e, 0]), int(cx.edges[e, 1])
+        Bu, Bv = L.bearings(u), L.bearings(v)
+        sides = []
+        for sg, off_u, off_v in recs:
+            why = marks.get((e, sg))
+            if why is not None:
+                sides.append(FenceSide(sg, "obstacle", why))
+                continue
+            du = wrap(Bu[v] + off_u)
+            dv = wrap(Bv[u] + off_v)
+            sides.append(FenceSide(sg, "frontier", "open", du, dv, off_u, off_v))
+            edge_ids = (int(ids[u]), int(ids[v]))
+            for p, d, off in ((u, du, off_u), (v, dv, off_v)):
+                if single[p]:
+                    continue
+                deps.setdefault(p, []).append(
+                    Deployment(int(ids[p]), d, edge_ids, sg, off, L.clearance(p, d), "edge"))
+        fe = FenceEdge(int(ids[u]), int(ids[v]), e, tuple(sides))
+        fence_edges.append(fe)
+        if fe.is_frontier:
+            K.append(e)
+        if fe.is_obstacle:
+            O.append(e)
+        if len(recs) == 1:
+            z.append(e)
+
+    # single-file robots (no triangle): away from the circular mean of the neighbours
+    K_arr = np.array(sorted(K), dtype=_I64)
+    kv_local = set(cx.edges[K_arr].ravel().tolist()) if K_arr.size else set()
+    for p in sorted(kv_local):
+        if single[p]:
+            mean, _ = circular_mean(L.bearings(p).values())
+            d = wrap(mean + math.pi)
+            deps.setdefault(p, []).append(Deployment(int(ids[p]), d, None, 0, 0.0, L.clearance(p, d), "single_file"))
+    for p in np.nonzero(cx.degree == 0)[0].tolist():
+        d = wrap(default_bearing)
+        deps.setdefault(p, []).append(Deployment(int(ids[p]), d, None, 0, 0.0, math.pi, "isolated"))
+    # test-drive failures also drop deployments pointing into the failed gap
+    for p, phi in failed.items():
+        if p in deps:
+            keep = [dp for dp in deps[p] if not L.same_gap(p, phi, dp.bearing)]
+            if keep:
+                deps[p] = keep
+            else:
+                del deps[p]
+
+    deployments = {
+        int(ids[p]): tuple(sorted(lst, key=lambda d: (-d.clearance, d.edge or (0, 0), d.sigma)))
+        for p, lst in sorted(deps.items())
+    }
+    fence_edges.sort(key=lambda f: f.index)
+    z_raw = np.array(sorted(z), dtype=_I64)
+    band = np.zeros(cx.n, dtype=bool)
+    if open_sides or exceptions:
+        band[cx.edges[np.array(list(open_sides) + exceptions, dtype=_I64)].ravel()] = True
+    repair = _repair_cycle(cx, z_raw, band) if z_raw.size else np.zeros(0, _I64)
+    zmask = np.zeros(E, dtype=bool)
+    zmask[z_raw] = True
+    zmask[repair] ^= True
+    O_arr = np.array(sorted(O), dtype=_I64)
+    fv_K = frozenset(ids[cx.edges[K_arr]].ravel().tolist()) if K_arr.size else frozenset()
+    fv_O = frozenset(ids[cx.edges[O_arr]].ravel().tolist()) if O_arr.size else frozenset()
+    frontier_vertices = fv_K | frozenset(deployments)
+    return Fence(
+        edges=tuple(fence_edges),
+        frontier=K_arr,
+        obstacle=O_arr,
+        exceptions=np.array(sorted(exceptions), dtype=_I64),
+        z=np.nonzero(zmask)[0],
+        z_raw=z_raw,
+        z_repair=repair,
+        deployments=deployments,
+        frontier_vertices=frontier_vertices,
+        obstacle_vertices=fv_O,
+        fence_vertices=fv_K | fv_O,
+        by_index={f.index: f for f in fence_edges},
+    )

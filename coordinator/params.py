@@ -1,0 +1,61 @@
+"""Parameters of the topology core (spec section 1.8), in one frozen dataclass.
+
+Lengths are in the same unit as the visibility radius ``rv`` (normalised to 1);
+angles are in radians.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+__all__ = ["TopologyParams"]
+
+
+@dataclass(frozen=True)
+class TopologyParams:
+    """Tunable constants of the coverage algorithm.
+
+    rv: visibility radius. eps: separation margin (target spacing d0 = rv - eps);
+    defaults to 0.1*rv. beta: bearing-noise bound (rad). n_touch: number of binary
+    contact sensors N_T (tau = pi/N_T). w_obstacle: path cost of an obstacle edge (> 1).
+    d_td: test-drive distance, defaults to 0.25*rv. gamma: concave-corner angle
+    threshold (rad). redundancy_period: T_H, deployment cycles between redundancy passes.
+    """
+
+    rv: float = 1.0
+    eps: float | None = None
+    beta: float = math.radians(2.0)
+    n_touch: int = 8
+    w_obstacle: float = 3.0
+    d_td: float | None = None
+    gamma: float = 3.0 * math.pi / 4.0
+    redundancy_period: int = 10
+
+    def __post_init__(self) -> None:
+        if self.eps is None:
+            object.__setattr__(self, "eps", 0.1 * self.rv)
+        if self.d_td is None:
+            object.__setattr__(self, "d_td", 0.25 * self.rv)
+        if not self.rv > 0:
+            raise ValueError("rv must be positive")
+        if not 0 <= self.eps < self.rv:
+            raise ValueError("eps must be in [0, rv)")
+        if self.n_touch < 1:
+            raise ValueError("n_touch must be >= 1")
+        if not self.w_obstacle >= 1:
+            raise ValueError("w_obstacle must be >= 1")
+
+    @property
+    def tau(self) -> float:
+        """Touch-direction resolution pi/N_T (rad)."""
+        return math.pi / self.n_touch
+
+    @property
+    def d0(self) -> float:
+        """Assumed inter-robot spacing rv - eps."""
+        return self.rv - self.eps
+
+    @property
+    def corner_threshold(self) -> float:
+        """Convex-corner / occlusion threshold pi/3 - 2*beta (rad)."""
+        return math.pi / 3.0 - 2.0 * self.beta
