@@ -243,3 +243,47 @@ def test_bad_config_exits_naming_the_field(procs, tmp_path):
     assert f"{cfg}: [hwbridge] kp = 'fast': expected a finite number" in p.output()
     p = procs.swarmcover("fake-robot", cfg, "--id", "9", "--connect", "tcp/127.0.0.1:9")
     assert p.wait(30) == 2
+
+
+POSE_STAMPED_CONFIG = 'name = "hwb_ros_mocap"\n' + MAP + """
+[hwbridge]
+mocap = {type = "zenoh", key = "vrpn_mocap/{body}/pose", format = "pose_stamped"}
+up_axis = "z"
+transform = {yaw = 1.0, tx = 0.5, ty = 0.25}
+[[hwbridge.robots]]
+id = 5
+body = "scarab5"
+"""
+
+
+def test_ros2_pose_stamped_mocap_source(procs, router, zargs, tmp_path):
+    """A ROS 2 mocap node seen through zenoh-bridge-ros2dds: CDR PoseStamped on a raw key."""
+    from hwbridge.frames import Transform2D, world_to_mocap
+    from hwbridge.ros2 import PoseStamped, encode_pose_stamped
+    cfg = tmp_path / "ros_mocap.toml"
+    cfg.write_text(POSE_STAMPED_CONFIG)
+    swarm = zargs[zargs.index("--swarm") + 1]
+    keys = Keys(swarm)
+    bridge = procs.swarmcover("hwbridge", cfg, *zargs)
+    bridge.wait_line("READY hwbridge", timeout=30)
+    s = client_session(router, swarm)
+    rec = Recorder(s, [keys.odom(5)])
+    try:
+        pos, q = world_to_mocap(1.25, 0.75, -2.0, "z", Transform2D(1.0, 0.5, 0.25), 0.12)
+        payload = encode_pose_stamped(PoseStamped(12.0, "mocap", pos, q))
+        s.put("vrpn_mocap/scarab5/pose", b"\x00\x01\x00\x00garbage")   # dropped, counted
+        end = time.monotonic() + 10
+        while time.monotonic() < end and not rec.get():
+            s.put("vrpn_mocap/scarab5/pose", payload)
+            time.sleep(0.02)
+        odom = [decode(b, Pose) for _, _, b, _ in rec.get()]
+    finally:
+        rec.close()
+        s.close()
+    assert odom, bridge.output()
+    assert (odom[-1].x, odom[-1].y, odom[-1].theta) == pytest.approx((1.25, 0.75, -2.0), abs=1e-6)
+    assert "dropping invalid PoseStamped on vrpn_mocap/scarab5/pose" in bridge.output()
+    bridge.signal(signal.SIGTERM)
+    rep = summary_of(bridge)
+    assert rep["invalid_messages"] >= 1
+    assert bridge.wait(15) == 0
