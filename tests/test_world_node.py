@@ -256,3 +256,27 @@ def test_bad_config_exits_2_naming_the_field(procs, tmp_path):
     w = procs.swarmcover("world", bad, "--connect", "tcp/127.0.0.1:9")
     assert w.wait(timeout=30) == 2
     assert f"{bad}: [world] mode = 'warp'" in w.output()
+
+
+def test_an_agent_that_leaves_is_no_longer_waited_for(procs, router, zargs, tmp_path):
+    keys = Keys(swarm_of(zargs))
+    s = client_session(router, keys.swarm)
+    token = s.liveliness().declare_token(keys.alive("robot", 1))
+    try:
+        out = tmp_path / "truth.json"
+        cfg = config(tmp_path, timeout=20.0, extra="spawn = [{robot = 1}]")
+        w = procs.swarmcover("world", cfg, *zargs, "--max-ticks", 8, "--truth-out", out)
+        w.wait_line("READY world", timeout=30)
+        time.sleep(0.3)
+        assert w.p.poll() is None                 # tick 0 waits for agent 1
+        token.undeclare()
+        token = None
+        t0 = time.monotonic()
+        assert w.wait(timeout=15) == 0
+        assert time.monotonic() - t0 < 10         # far less than one 20 s timeout
+        summary = json.loads(out.read_text())["summary"]
+        assert summary["ticks"] == 8 and summary["late"] == 0
+    finally:
+        if token is not None:
+            token.undeclare()
+        s.close()

@@ -100,6 +100,11 @@ class WorldNode:
     def declare(self) -> None:
         k, s = self.keys, self.s
         cb = self.mail.callback
+        # agents already present: a synchronous snapshot, so tick 0 already waits for them.
+        # Taken before the liveliness subscriber exists (with one declared, the get was seen
+        # answering from the still-empty local cache); the subscriber's history covers any
+        # token that appears in between.
+        self.agents |= self.alive_snapshot() or set()
         for key in (f"{k.prefix}/robot/*/cmd_vel", f"{k.prefix}/robot/*/twin_cmd", k.spawn,
                     k.remove):
             self._subs.append(s.declare_subscriber(key, cb))
@@ -114,15 +119,22 @@ class WorldNode:
         self._info_bytes = info.validate().encode()
         self._queryable = s.declare_queryable(k.world_info)
         self._token = s.liveliness().declare_token(k.alive("world", "main"))
-        # agents already present: a synchronous snapshot, so tick 0 already waits for them
+        self.log.debug("agents present at start: %s", sorted(self.agents))
+
+    def alive_snapshot(self) -> set[int] | None:
+        """Robot ids whose liveliness token is present now (None if the query failed)."""
+        k = self.keys
+        out: set[int] = set()
         try:
-            for reply in s.liveliness().get(k.alive_robots(), timeout=2.0):
+            for reply in self.s.liveliness().get(k.alive_robots(), timeout=2.0):
                 if reply.ok is not None:
                     rid = k.robot_id(str(reply.ok.key_expr))
                     if rid is not None:
-                        self.agents.add(rid)
+                        out.add(rid)
         except Exception as e:  # a missing snapshot only delays waiting for those agents
             self.log.warning("liveliness snapshot failed: %s", e)
+            return None
+        return out
 
     def close(self) -> None:
         for rid in list(self.pubs):
@@ -292,6 +304,10 @@ class WorldNode:
                     self.log.warning("tick %d: robots %s did not answer within %.2f s "
                                      "(further late ticks are counted)", self.tick,
                                      sorted(late)[:10], self.gate.timeout_s)
+                # an agent whose token vanished unseen must not stall every tick
+                alive = self.alive_snapshot()
+                if alive is not None:
+                    self.agents -= late - alive
         ids = self.physics.ids
         self.physics.step(self._commands(ids))
         self.tick += 1
