@@ -41,6 +41,7 @@ __all__ = [
     "boundary_of",
     "is_cocycle",
     "fence_cycle",
+    "certificate_from_chain",
 ]
 
 _I64 = np.int64
@@ -135,6 +136,18 @@ def verify_certificate(cx: Complex, cert: Certificate, z=None) -> bool:
     if ob.size == 0:
         return False
     return is_cocycle(cx, ob) and bool(zm[ob].sum() & 1)
+
+
+def certificate_from_chain(cx: Complex, z, chain, stats: Mapping[str, Any] | None = None) -> Certificate:
+    """Wrap a known chain as a Certificate; raises ValueError unless boundary(chain) = z."""
+    zm = _as_edge_mask(cx, z)
+    chain = np.sort(np.asarray(chain, dtype=_I64).ravel())
+    if not np.array_equal(boundary_of(cx, chain), zm):
+        raise ValueError("boundary(chain) != z")
+    chain_nodes = cx.ids[cx.triangles[chain]] if chain.size else np.zeros((0, 3), _I64)
+    e = np.zeros(0, dtype=_I64)
+    return Certificate(True, np.nonzero(zm)[0], chain, e, e, e, chain_nodes, np.zeros((0, 2), _I64),
+                       np.unique(chain_nodes) if chain.size else e, dict(stats or {}))
 
 
 def fence_cycle(cx: Complex, fence) -> np.ndarray:

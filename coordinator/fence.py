@@ -54,8 +54,8 @@ class Deployment:
 class FenceSide:
     """One open side of a fence edge.
 
-    kind: 'frontier' or 'obstacle'. reason: 'open', 'both_touch', 'convex_corner' or
-    'test_drive'. deploy_u / deploy_v: deployment bearings (rad) in the body frames of u
+    kind: 'frontier' or 'obstacle'. reason: 'open', 'both_touch', 'convex_corner',
+    'test_drive' or 'forced'. deploy_u / deploy_v: deployment bearings (rad) in the body frames of u
     and v (None for obstacle sides). offset_u / offset_v: theta_new at u and at v.
     """
 
@@ -300,6 +300,7 @@ def detect_fence(
     params: TopologyParams | None = None,
     *,
     test_drive_failures: Mapping[int, float] | None = None,
+    forced_obstacle=(),
     default_bearing: float = 0.0,
 ) -> Fence:
     """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
@@ -308,6 +309,8 @@ def detect_fence(
       drive that touched an obstacle (spec 3.4(iv)); the fence edges bounding that
       angular gap at the robot become obstacle edges and its deployments into the gap
       are dropped.
+    forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
+      e.g. edges reclassified after a failed test drive in an earlier cycle.
     default_bearing: deployment direction (rad, body frame) of a robot with no
       neighbour at all.
     """
@@ -403,6 +406,14 @@ def detect_fence(
             for q, side_at_p in ((a, 1), (b, -1)):
                 e2 = int(cx.edge_index(p, q))
                 marks[(e2, _canon(p, q, side_at_p))] = "test_drive"
+
+    for pair in forced_obstacle:
+        a, b = (int(x) for x in pair)
+        if a in cx and b in cx:
+            e2 = int(cx.edge_index(cx.index_of(a), cx.index_of(b)))
+            if e2 >= 0:
+                for sg in (1, -1):
+                    marks[(e2, sg)] = "forced"
 
     # ---- assemble
     fence_edges: list[FenceEdge] = []
