@@ -82,6 +82,7 @@ class Behaviour:
         self.contact_bearing = 0.0   # body frame at the time of contact (rad)
         self.contact_frame: FrameTracker | None = None
         self.contact_pinned = False
+        self.return_goal: dict[int, float] | None = None  # test drive: re-home after reversing
         self.contact_moved = 0.0
         # homing
         self.stop = StopRule(p.arrive, p.arrive_ticks, p.error_alpha)
@@ -572,7 +573,11 @@ class Behaviour:
         if self.purpose == "deploy":
             self._after_deploy_motion()
         elif self.purpose == "return":
-            self._finish("failed", "touch")
+            goal, self.return_goal = self.return_goal, None
+            if goal and sum(1 for l in goal if l in self.seen) >= min(2, len(goal)):
+                self._enter_home(goal, "return")
+            else:
+                self._finish("failed", "touch")
         else:  # test drive completed without a blocking touch
             self._finish("done")
 
@@ -580,13 +585,11 @@ class Behaviour:
         """Test drive hit an obstacle: keep the contact, go back, fail with "touch"."""
         self.contact_pinned = True
         self.changed = True
-        goal = self._task_goal(self.task)
-        if goal:
-            self._enter_home(goal, "return")
-        else:
-            travelled = self.advance - self.mark
-            self._enter_open(wrap(self.ol_dir + PI), max(0.0, travelled), self.ol_speed,
-                             "return")
+        # first reverse what was driven (always possible: open loop), then re-home on the
+        # vertex's bearings if any; a landmark lost during the drive cannot strand us
+        travelled = self.advance - self.mark
+        self.return_goal = self._task_goal(self.task)
+        self._enter_open(wrap(self.ol_dir + PI), max(0.0, travelled), self.ol_speed, "return")
 
     # ------------------------------------------------------------------ scale correction
 

@@ -502,7 +502,7 @@ class WorldInfo(Message):
 class MocapPose(Message):
     """Mocap source -> hwbridge: a rigid body's pose in the mocap frame (m, unit quaternion)."""
     body: str = f_str(maxlen=200)
-    t: float = f_float(0.0)
+    t: float = f_float(0.0, 1e11)  # source clock (s): may be Unix time
     x: float = f_float(-1e6, 1e6)
     y: float = f_float(-1e6, 1e6)
     z: float = f_float(-1e6, 1e6)

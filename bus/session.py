@@ -137,7 +137,18 @@ class Shutdown:
         if threading.current_thread() is threading.main_thread():
             for s in self._signals:
                 self._old[s] = signal.signal(s, self._handle)
+        if os.environ.get("SWARMCOVER_WATCH_PARENT") == "1":
+            threading.Thread(target=self._watch_parent, args=(os.getppid(),), daemon=True,
+                             name="watch-parent").start()
         return self
+
+    def _watch_parent(self, ppid: int) -> None:
+        """Launched by a supervisor (env SWARMCOVER_WATCH_PARENT=1): when it dies, stop too,
+        so a killed ``swarmcover run`` never leaves orphans behind."""
+        while not self.event.wait(0.5):
+            if os.getppid() != ppid:
+                self.signum = signal.SIGHUP
+                self.event.set()
 
     def __exit__(self, *exc) -> None:
         for s, h in self._old.items():

@@ -1,0 +1,81 @@
+"""The ``[coordinator]`` section of a run config, validated into a frozen dataclass.
+
+Lengths in metres (relative values are multiplied by rv), times in simulated seconds.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+from .params import TopologyParams
+
+
+@dataclass(frozen=True)
+class CoordinatorConfig:
+    """Deployment-cycle settings (spec sections 1.8, 4 and 5)."""
+
+    rv: float = 1.0
+    eps_rv: float = 0.1            # separation margin as a fraction of rv (d0 = rv - eps)
+    beta_deg: float = 2.0          # bearing-noise bound
+    n_touch: int = 8
+    w_obstacle: float = 3.0        # path cost of an obstacle edge
+    test_drive: bool = True        # spec 3.4(iv)
+    d_td_rv: float = 0.25          # test-drive distance as a fraction of rv
+    redundancy_period: int = 10    # T_H: cycles between redundancy passes
+    scale_correct_period: int = 5  # run scale correction on a new frontier robot every N cycles
+    push_mode: str = "parallel"    # "parallel": movers along a path go at once where >= 2 static
+                                   # landmarks exist; "sequential": strictly from the front
+    max_paths: int = 8             # pushes per cycle (vertex-disjoint paths)
+    robots_max: int = 400          # stop (not certified) if more would be needed
+    task_timeout_s: float = 40.0   # per task, simulated seconds
+    spawn_timeout_s: float = 60.0  # new agent must report within this (sim s)
+    settle_s: float = 0.6          # wait after a cycle's last task before re-planning (sim s)
+    dead_after_cycles: int = 3     # heartbeat: robot with no status for this many cycles is dead
+    max_cycles: int = 100000
+    final_recheck: bool = True     # after K is empty: redistribute redundant robots, re-certify
+
+    def __post_init__(self):
+        if self.push_mode not in ("parallel", "sequential"):
+            raise ValueError(f"[coordinator] push_mode = {self.push_mode!r}: "
+                             "use 'parallel' or 'sequential'")
+        for name in ("rv", "task_timeout_s", "spawn_timeout_s"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"[coordinator] {name} = {getattr(self, name)!r}: must be > 0")
+        if not 0 <= self.eps_rv < 1:
+            raise ValueError(f"[coordinator] eps_rv = {self.eps_rv!r}: must be in [0, 1)")
+        if self.max_paths < 1 or self.robots_max < 1:
+            raise ValueError("[coordinator] max_paths and robots_max must be >= 1")
+
+    @property
+    def d0(self) -> float:
+        return self.rv * (1.0 - self.eps_rv)
+
+    def topology(self) -> TopologyParams:
+        return TopologyParams(rv=self.rv, eps=self.eps_rv * self.rv,
+                              beta=math.radians(self.beta_deg), n_touch=self.n_touch,
+                              w_obstacle=self.w_obstacle, d_td=self.d_td_rv * self.rv,
+                              redundancy_period=self.redundancy_period)
+
+    @classmethod
+    def from_section(cls, section: dict | None, rv: float, where: str = "config") -> "CoordinatorConfig":
+        """Build from a raw ``[coordinator]`` dict; unknown keys are errors naming the key."""
+        section = dict(section or {})
+        known = {f.name for f in fields(cls)} - {"rv"}
+        bad = sorted(set(section) - known)
+        if bad:
+            raise ValueError(f"{where}: [coordinator] unknown field {bad[0]!r} "
+                             f"(known: {', '.join(sorted(known))})")
+        for f in fields(cls):
+            if f.name in section:
+                v = section[f.name]
+                want = type(f.default)
+                if want is float and isinstance(v, int) and not isinstance(v, bool):
+                    v = float(v)
+                if not isinstance(v, want) or (want is int and isinstance(v, bool)):
+                    raise ValueError(f"{where}: [coordinator] {f.name} = {v!r}: expected "
+                                     f"{want.__name__}")
+                section[f.name] = v
+        try:
+            return cls(rv=rv, **section)
+        except ValueError as e:
+            raise ValueError(f"{where}: {e}") from None

@@ -1,0 +1,729 @@
+"""The deployment cycle (spec 4.1) as a pure state machine: events in, actions out.
+
+No Zenoh and no clocks of its own: the process (coordinator/node.py) feeds it agent Status
+messages, liveliness changes and the simulated time, and executes the actions it returns
+(send a Task, spawn or remove a robot, publish the Complex). That keeps the logic testable
+and makes a restarted coordinator rebuild its state from the agents' statuses alone.
+
+Vertices (positions) are the complex's nodes; robots occupy them (spec 2.3). A push along a
+path p0 -> ... -> pm = f moves the robot at f to a new vertex beyond the frontier and every
+robot at p_t to p_{t+1}; if p0 is a source vertex a new robot enters from the base to p0
+(spec 4.3). The covered graph never changes; only occupants move along it.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+from bus.messages import Complex, Remove, Spawn, Status, Task
+
+from .config import CoordinatorConfig
+from .planner import CyclePlan, JobSpec, Snapshot, plan_cycle
+
+log = logging.getLogger("swarmcover.coordinator")
+
+SETTLED_STATES = ("holding", "idle")
+
+
+def wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+@dataclass
+class Robot:
+    rid: int
+    kind: str = "holonomic"
+    live: bool = False
+    alive: bool = False          # liveliness token present
+    status: Status | None = None
+    status_cycle: int = -1       # cycle in which the last status arrived
+    spawned_t: float = 0.0
+    dead: bool = False
+
+
+@dataclass
+class Step:
+    """One robot's task within a push job."""
+    name: str                     # "test_drive", "deploy", "move", "enter"
+    robot: int                    # -1 for "enter" until the new robot exists
+    target: int                   # target vertex id
+    t_index: int = -1             # for "move": index t of p_t -> p_{t+1}
+    task_id: int = -1
+    state: str = "pending"        # pending, running, done, failed, cancelled
+    reason: str = ""
+    started_t: float = 0.0
+
+
+@dataclass
+class PushJob:
+    spec: JobSpec
+    steps: list[Step] = field(default_factory=list)
+    aborted: bool = False
+    feed: "PushJob | None" = None   # earlier job at the same source: its new robot moves here
+
+    def steps_at_source(self) -> "Step | None":
+        """The step that moves the robot away from p0 (deploy when the path is just p0)."""
+        if len(self.spec.path) == 1:
+            return self.step("test_drive") or self.step("deploy")
+        return self.step("move", 0)
+
+    def step(self, name: str, t_index: int = -1) -> Step | None:
+        for s in self.steps:
+            if s.name == name and s.t_index == t_index:
+                return s
+        return None
+
+    @property
+    def finished(self) -> bool:
+        return all(s.state in ("done", "failed", "cancelled") for s in self.steps)
+
+
+class Deployer:
+    """Runs deployment cycles until the frontier is empty and coverage is certified."""
+
+    def __init__(self, cfg: CoordinatorConfig, *, sources: list[float], epoch: int = 0,
+                 robot_kind: Callable[[int], tuple[str, bool]] | None = None,
+                 planner: Callable[..., CyclePlan] = plan_cycle):
+        """sources: heading (rad, world frame) of each base station, by source index."""
+        self.cfg = cfg
+        self.params = cfg.topology()
+        self.sources = list(sources)
+        self.epoch = epoch
+        self.robot_kind = robot_kind or (lambda rid: ("holonomic", False))
+        self.planner = planner
+        self.robots: dict[int, Robot] = {}
+        self.vertex_of: dict[int, int] = {}          # robot -> vertex
+        self.contact: dict[int, float] = {}          # vertex -> sticky contact bearing
+        self.td_failures: dict[int, float] = {}      # vertex -> failed test-drive bearing
+        self.redundant: set[int] = set()             # vertices
+        self.left: set[int] = set()                  # robots sent away (redundant, idle)
+        self.next_robot = 0
+        self.next_vertex = len(self.sources)
+        self.next_task = 1
+        self.cycle = 0
+        self.phase = "init"
+        self.phase_t = 0.0
+        self.jobs: list[PushJob] = []
+        self.plan: CyclePlan | None = None
+        self.snapshot: Snapshot | None = None
+        self.cycle_end_t = 0.0
+        self.failures = 0
+        self.failures_healed = 0
+        self._pending_failures = 0
+        self.done = False
+        self.certified = False
+        self.stop_reason = ""
+        self.final_pass = False
+        self.uncertified_idle = 0
+        self._out: list = []
+        self.started = False
+
+    # ------------------------------------------------------------------ events
+    def on_status(self, st: Status) -> None:
+        r = self.robots.get(st.robot)
+        if r is None:
+            kind, live = self.robot_kind(st.robot)
+            r = self.robots[st.robot] = Robot(st.robot, kind=st.kind or kind, live=st.live)
+            self.next_robot = max(self.next_robot, st.robot + 1)
+        if r.dead:
+            return
+        if r.status is not None and st.seq < r.status.seq and st.t <= r.status.t:
+            return  # stale
+        r.status = st
+        r.status_cycle = self.cycle
+        r.alive = True
+        if self.phase == "init" and st.vertex >= 0:
+            # restart: adopt the agent's own idea of its vertex
+            self.vertex_of.setdefault(st.robot, st.vertex)
+            self.next_vertex = max(self.next_vertex, st.vertex + 1)
+        if st.task_id >= 0:
+            self.next_task = max(self.next_task, (st.task_id % 1_000_000) + 1)
+        v = self.vertex_of.get(st.robot)
+        if (v is not None and st.contact and st.state == "holding"
+                and st.vertex == v and st.task_state != "running"):
+            self.contact[v] = st.contact_bearing
+        self._track_tasks(r)
+
+    def on_alive(self, rid: int, present: bool, now: float) -> None:
+        r = self.robots.get(rid)
+        if present:
+            if r is None:
+                kind, live = self.robot_kind(rid)
+                r = self.robots[rid] = Robot(rid, kind=kind, live=live)
+                self.next_robot = max(self.next_robot, rid + 1)
+            if not r.dead:
+                r.alive = True
+            return
+        if r is None or r.dead:
+            return
+        self._robot_died(r, now, "liveliness token gone")
+
+    def reopen_if_needed(self, now: float) -> bool:
+        """After certification, a robot failure re-opens the cycles (its hole is refilled)."""
+        if self.done and self.certified and self._pending_failures:
+            log.info("a robot failed after certification: resuming deployment cycles")
+            self.done = self.certified = False
+            self.final_pass = False
+            self._set_phase("settle", now)
+            return True
+        return False
+
+    # ------------------------------------------------------------------ main
+    def step(self, now: float) -> list:
+        """Advance the state machine at simulated time ``now``; return actions to execute."""
+        self._out = []
+        if self.done:
+            return self._out
+        self._heartbeat(now)
+        handler = getattr(self, f"_phase_{self.phase}")
+        handler(now)
+        return self._out
+
+    # ------------------------------------------------------------------ phases
+    def _phase_init(self, now: float) -> None:
+        if not self.started:
+            self.started = True
+            self.phase_t = now
+            return
+        known = [r for r in self.robots.values() if r.alive and r.status is not None]
+        if known and now - self.phase_t >= 0.5:
+            log.info("resuming with %d robots already deployed", len(known))
+            for r in known:
+                if r.rid not in self.vertex_of and r.status.vertex >= 0:
+                    self.vertex_of[r.rid] = r.status.vertex
+            self._set_phase("execute", now)  # wait for running tasks, then plan
+            return
+        if not known and now - self.phase_t >= 1.0:
+            for k in range(len(self.sources)):
+                self._spawn(k, now)
+            self._set_phase("first", now)
+
+    def _phase_first(self, now: float) -> None:
+        """Wait until the first robot(s) report, then make them hold the source vertices."""
+        firsts = [self.robots.get(k) for k in range(len(self.sources))]
+        if all(r is not None and r.status is not None for r in firsts):
+            for k, r in enumerate(firsts):
+                self.vertex_of[r.rid] = k
+                self._send(r.rid, Task(kind="hold", vertex=k, timeout_s=self.cfg.task_timeout_s), now)
+            self._set_phase("execute", now)
+        elif now - self.phase_t > self.cfg.spawn_timeout_s:
+            self._stop("first robot never reported (is an agent started for robot 0?)")
+
+    def _phase_execute(self, now: float) -> None:
+        for job in self.jobs:
+            self._advance_job(job, now)
+        if all(j.finished for j in self.jobs) and self._all_settled():
+            self.jobs = []
+            self.cycle_end_t = now
+            self._set_phase("settle", now)
+
+    def _phase_settle(self, now: float) -> None:
+        if now - self.phase_t < self.cfg.settle_s:
+            return
+        members = self._members()
+        fresh = all(self.robots[r].status.t >= self.phase_t for r in members)
+        if not fresh and now - self.phase_t < self.cfg.settle_s + 5.0:
+            return
+        self._plan(now)
+
+    def _phase_final(self, now: float) -> None:
+        """Redundant robots were sent away; re-certify once they are idle."""
+        if now - self.phase_t < self.cfg.settle_s:
+            return
+        if not self._all_settled():
+            return
+        self._plan(now)
+
+    # ------------------------------------------------------------------ planning
+    def _members(self) -> list[int]:
+        """Robots in the complex: alive, holding a vertex, not sent away."""
+        out = []
+        for rid, v in self.vertex_of.items():
+            r = self.robots.get(rid)
+            if r is None or r.dead or not r.alive or r.status is None or rid in self.left:
+                continue
+            out.append(rid)
+        return sorted(out)
+
+    def build_snapshot(self) -> Snapshot:
+        members = self._members()
+        vert = {rid: self.vertex_of[rid] for rid in members}
+        nbrs: dict[int, dict[int, float]] = {}
+        back: dict[int, dict[int, float]] = {}
+        for rid in members:
+            st = self.robots[rid].status
+            d = {}
+            for n, b in zip(st.nbr_ids, st.nbr_bearings):
+                if n in vert and n != rid:
+                    d[vert[n]] = b
+            nbrs[vert[rid]] = d
+        occupant = {v: r for r, v in vert.items()}
+        contact = {v: b for v, b in self.contact.items() if v in occupant}
+        kinds = {v: self.robots[r].kind for v, r in occupant.items()}
+        return Snapshot(occupant=occupant, nbrs=nbrs, contact=contact, kinds=kinds,
+                        sources=[k for k in range(len(self.sources)) if k in occupant],
+                        source_dirs=self.sources)
+
+    def _plan(self, now: float) -> None:
+        snap = self.snapshot = self.build_snapshot()
+        run_redundancy = (self.cycle % max(1, self.cfg.redundancy_period) == 0)
+        moving: set[int] = set()
+        plan = self.plan = self.planner(
+            snap, self.params, cycle=self.cycle, redundancy=run_redundancy or self.final_pass,
+            test_drive_failures={v: b for v, b in self.td_failures.items() if v in snap.occupant},
+            previous_redundant=self.redundant, protected=moving, max_paths=self.cfg.max_paths,
+            scale_correct=(self.cfg.scale_correct_period > 0
+                           and self.cycle % self.cfg.scale_correct_period == 0),
+            test_drive=self.cfg.test_drive, next_vertex=self.next_vertex)
+        self.next_vertex += len(plan.jobs)
+        self.redundant = set(plan.redundant)
+        self._out.append(("complex", self._complex_msg(plan, now, "running")))
+        if self._pending_failures and plan.certified:
+            self.failures_healed += self._pending_failures
+            self._pending_failures = 0
+        if not plan.frontier and not plan.open_vertices:
+            if plan.certified:
+                self._finish(plan, now)
+                return
+            self.uncertified_idle += 1
+            log.warning("cycle %d: no frontier edge but coverage is not certified (%d hole "
+                        "edges); re-planning", self.cycle, len(plan.hole_edges))
+            if self.uncertified_idle > 5:
+                self._stop("no frontier left but the certificate fails")
+                return
+        else:
+            self.uncertified_idle = 0
+        if self.cycle >= self.cfg.max_cycles:
+            self._stop(f"max_cycles = {self.cfg.max_cycles} reached")
+            return
+        self.final_pass = False
+        self.jobs = []
+        feeds: dict[int, PushJob] = {}
+        for spec in plan.jobs:
+            job = self._make_job(spec)
+            if spec.enter_source is not None:
+                job.feed = feeds.get(spec.path[0])   # the source's previous job this cycle
+                feeds[spec.path[0]] = job
+                if job.feed is not None:
+                    first = job.steps_at_source()
+                    if first is not None:
+                        first.robot = -1             # the robot that entered in job.feed
+            self.jobs.append(job)
+        if plan.frontier and not self.jobs:
+            log.warning("cycle %d: %d frontier edges but no feasible push", self.cycle,
+                        len(plan.frontier))
+        self.cycle += 1
+        self._set_phase("execute", now)
+
+    def _finish(self, plan: CyclePlan, now: float) -> None:
+        if self.cfg.final_recheck and not self.final_pass and plan.redundant:
+            # spec 5.4: final redundancy pass; redundant robots go idle, then re-certify
+            self.final_pass = True
+            for v in sorted(plan.redundant):
+                rid = snap_occ = self.snapshot.occupant.get(v)
+                if snap_occ is None:
+                    continue
+                self.left.add(rid)
+                self._send(rid, Task(kind="leave", vertex=-1,
+                                     timeout_s=self.cfg.task_timeout_s), now)
+            self.redundant = set()
+            self._set_phase("final", now)
+            return
+        if self.cfg.final_recheck and not self.final_pass:
+            self.final_pass = True
+            self._set_phase("final", now)
+            return
+        self.certified = True
+        self.done = True
+        self.stop_reason = "certified"
+        self._out.append(("complex", self._complex_msg(plan, now, "certified")))
+        self._out.append(("done", True))
+
+    def _stop(self, why: str) -> None:
+        log.error("stopping: %s", why)
+        self.done = True
+        self.stop_reason = why
+        if self.plan is not None:
+            self._out.append(("complex", self._complex_msg(self.plan, 0.0, "stopped")))
+        self._out.append(("done", False))
+
+    def _complex_msg(self, plan: CyclePlan, now: float, state: str) -> Complex:
+        snap = self.snapshot
+        verts = sorted(snap.occupant)
+        return Complex(
+            cycle=self.cycle, t=now, epoch=self.epoch, vertices=verts,
+            occupants=[snap.occupant[v] for v in verts],
+            edges=[int(x) for e in plan.edges for x in e],
+            triangles=[int(x) for t in plan.triangles for x in t],
+            frontier=list(plan.frontier), obstacle=list(plan.obstacle),
+            redundant=sorted(plan.redundant), sources=list(snap.sources),
+            certified=bool(plan.complete),
+            robots=sum(1 for r in self.robots.values() if r.alive and not r.dead), state=state)
+
+    # ------------------------------------------------------------------ jobs
+    def _make_job(self, spec: JobSpec) -> PushJob:
+        job = PushJob(spec)
+        path = spec.path
+        occ = self.snapshot.occupant
+        f = path[-1]
+        if spec.test_drive:
+            job.steps.append(Step("test_drive", occ[f], f))
+        job.steps.append(Step("deploy", occ[f], spec.new_vertex))
+        for t in range(len(path) - 2, -1, -1):
+            job.steps.append(Step("move", occ[path[t]], path[t + 1], t_index=t))
+        if spec.enter_source is not None:
+            job.steps.append(Step("enter", -1, path[0]))
+        job.steps.append(Step("refine", occ[f], spec.new_vertex))
+        return job
+
+    def _moving_vertices(self) -> set[int]:
+        out = set()
+        for j in self.jobs:
+            if not j.aborted:
+                out.update(j.spec.path)
+        return out
+
+    def _advance_job(self, job: PushJob, now: float) -> None:
+        """Start every step of a push whose preconditions hold (spec 4.3).
+
+        Order: test drive at f; deploy f's robot (open loop, or homing when >= 2 static
+        landmarks); movers from the front (p_{m-1} -> f first), each at once in parallel
+        mode when its target has >= 2 static landmarks, else when the robot ahead arrived;
+        a new robot enters p0 from the base; finally the deployed robot refines its
+        position with every landmark, including the robot now at f (and scale correction).
+        """
+        spec = job.spec
+        path = spec.path
+        for s in job.steps:
+            if s.state == "running":
+                self._check_timeout(s, now)
+        if job.aborted:
+            for s in job.steps:
+                if s.state == "pending":
+                    s.state = "cancelled"
+            return
+        # a secondary job at a shared source starts with the robot the previous one brought in
+        first = job.steps_at_source()
+        if first is not None and first.robot < 0:
+            fed = job.feed.step("enter") if job.feed is not None else None
+            if fed is None or fed.state in ("failed", "cancelled") or job.feed.aborted:
+                self._cancel(job, "source feed failed")
+                return
+            if fed.state != "done":
+                return
+            first.robot = fed.robot
+            if len(path) == 1:  # the entered robot itself deploys (and refines)
+                for s in job.steps:
+                    if s.name in ("test_drive", "deploy", "refine"):
+                        s.robot = fed.robot
+        td = job.step("test_drive")
+        dep = job.step("deploy")
+        if td is not None:
+            if td.state == "pending":
+                self._start(td, self._task_test_drive(spec), now)
+                return
+            if td.state == "running":
+                return
+            if td.state == "failed":
+                self._test_drive_failed(job, td)
+                return
+        if dep.state == "pending":
+            self._start(dep, self._task_deploy(spec, job), now)
+        sequential = self.cfg.push_mode == "sequential"
+        prev = dep  # the step ahead of the current mover
+        for t in range(len(path) - 2, -1, -1):
+            mv = job.step("move", t)
+            if mv.state == "pending":
+                ahead_done = prev.state in ("done", "failed")
+                ahead_started = prev.state != "pending"
+                task = self._task_move(job, t, arrived=ahead_done)
+                static_ok = task is not None and len(task.landmarks) >= 2
+                if ahead_done or (not sequential and ahead_started and static_ok):
+                    if task is None:
+                        task = Task(kind="hold", vertex=path[t + 1])
+                    self._start(mv, task, now)
+                else:
+                    break
+            prev = mv
+        ent = job.step("enter")
+        at_f = prev  # the step that brings a robot to f (last mover, or the entering robot)
+        if ent is not None:
+            if ent.state == "pending" and prev.state != "pending":
+                self._advance_enter(job, ent, prev, sequential, now)
+            if len(path) == 1:
+                at_f = ent
+        ref = job.step("refine")
+        if ref.state == "pending" and dep.state in ("done", "failed") and \
+                at_f.state in ("done", "failed", "cancelled"):
+            task = self._task_refine(spec, job, at_f)
+            if task is None:
+                ref.state = "cancelled"
+            else:
+                self._start(ref, task, now)
+
+    def _advance_enter(self, job: PushJob, ent: Step, prev: Step, sequential: bool,
+                       now: float) -> None:
+        path = job.spec.path
+        ahead_done = prev.state in ("done", "failed")
+        if sequential and not ahead_done:
+            return
+        if ent.robot < 0:
+            if self._robots_in_use() >= self.cfg.robots_max:
+                ent.state, ent.reason = "cancelled", "robots_max"
+                log.warning("robots_max = %d reached: not refilling the source",
+                            self.cfg.robots_max)
+                return
+            ent.robot = self._spawn(job.spec.enter_source, now)
+            ent.started_t = now
+        r = self.robots.get(ent.robot)
+        if r is None or r.status is None:
+            if now - ent.started_t > self.cfg.spawn_timeout_s:
+                ent.state, ent.reason = "failed", "new robot never reported"
+            return
+        task = self._task_move(job, -1, arrived=ahead_done)
+        if task is None or len(task.landmarks) < 2:
+            if not ahead_done:
+                return
+        if task is None:
+            task = Task(kind="hold", vertex=path[0])
+        self.vertex_of[ent.robot] = path[0]
+        self._start(ent, task, now)
+
+    def _cancel(self, job: PushJob, why: str) -> None:
+        job.aborted = True
+        for s in job.steps:
+            if s.state == "pending":
+                s.state, s.reason = "cancelled", why
+
+    def _start(self, s: Step, task: Task, now: float) -> None:
+        s.task_id = self._send(s.robot, task, now)
+        s.state = "running"
+        s.started_t = now
+
+    def _check_timeout(self, s: Step, now: float) -> None:
+        r = self.robots.get(s.robot)
+        if r is None or r.dead:
+            s.state, s.reason = "failed", "robot died"
+        elif now - s.started_t > self.cfg.task_timeout_s + 10.0:
+            s.state, s.reason = "failed", "no report from the agent"
+
+    def _track_tasks(self, r: Robot) -> None:
+        st = r.status
+        for job in self.jobs:
+            for s in job.steps:
+                if s.robot == r.rid and s.task_id == st.task_id and s.state == "running":
+                    if st.task_state == "done":
+                        s.state = "done"
+                        self._step_done(job, s)
+                    elif st.task_state == "failed":
+                        s.state, s.reason = "failed", st.reason
+                        self._step_done(job, s)
+
+    def _step_done(self, job: PushJob, s: Step) -> None:
+        """Book-keeping of occupancy when a step ends (done or failed: the robot is there
+        or near; the next cycle's complex is rebuilt from observations anyway)."""
+        if s.name == "test_drive":
+            return
+        if s.state == "failed":
+            log.info("cycle %d: %s of robot %d to vertex %d failed: %s", self.cycle, s.name,
+                     s.robot, s.target, s.reason)
+        self.vertex_of[s.robot] = s.target
+        if s.name == "move" and s.t_index == 0 and job.spec.enter_source is None:
+            # p0 was a redundant vertex: it is left empty
+            self.redundant.discard(job.spec.path[0])
+
+    def _test_drive_failed(self, job: PushJob, td: Step) -> None:
+        spec = job.spec
+        if td.reason.startswith("touch"):
+            st = self.robots[td.robot].status
+            bearing = st.contact_bearing if st is not None and st.contact else spec.direction
+            self.td_failures[spec.path[-1]] = bearing
+            self.contact[spec.path[-1]] = bearing
+            log.info("cycle %d: test drive from vertex %d touched an obstacle: %s -> O",
+                     self.cycle, spec.path[-1], spec.reclassify_on_touch)
+        for s in job.steps:
+            if s.state == "pending":
+                s.state = "cancelled"
+
+    # ------------------------------------------------------------------ tasks
+    def _ref_offsets(self, recorder_vertex: int, landmark_vertices: list[int]) -> list[float]:
+        """Frame alignment data (spec 4.7): heading of the recorder minus each landmark's
+        heading, from mutual bearings. [] when every robot is holonomic (frames parallel)."""
+        snap = self.snapshot
+        if all(k == "holonomic" for k in snap.kinds.values()):
+            return []
+        out = []
+        for u in landmark_vertices:
+            a = snap.nbrs.get(recorder_vertex, {}).get(u)
+            b = snap.nbrs.get(u, {}).get(recorder_vertex)
+            if a is None or b is None:
+                return []
+            out.append(wrap(b - a + math.pi))
+        return out
+
+    def _task_test_drive(self, spec: JobSpec) -> Task:
+        f = spec.path[-1]
+        lm, br = self._vertex_landmarks(f, exclude=set())
+        return Task(kind="test_drive", vertex=f, landmarks=lm, bearings=br,
+                    ref_offsets=self._ref_offsets(f, [self.vertex_of[r] for r in lm]),
+                    direction=spec.direction, distance=self.params.d_td,
+                    timeout_s=self.cfg.task_timeout_s)
+
+    def _static(self, v: int) -> bool:
+        """Vertex v's occupant stays put this cycle (not on any path, not a new position)."""
+        return v not in self._moving_vertices()
+
+    def _task_deploy(self, spec: JobSpec, job: PushJob) -> Task:
+        """Frontier robot to the new position (spec 4.4): homing on the static landmarks of
+        the assumed geometry if there are >= 2, else open loop along the deployment
+        direction (spec 4.6), keeping the single landmark in sight."""
+        occ = self.snapshot.occupant
+        f = spec.path[-1]
+        lm, br = [], []
+        for v, b in zip(spec.deploy_landmarks, spec.deploy_bearings):
+            if v != f and v in occ and self._static(v):
+                lm.append(occ[v])
+                br.append(b)
+        dist = self.cfg.d0 - (self.params.d_td if spec.test_drive else 0.0)
+        task = Task(kind="deploy", vertex=spec.new_vertex, landmarks=lm, bearings=br,
+                    direction=spec.direction, distance=max(0.0, dist),
+                    timeout_s=self.cfg.task_timeout_s)
+        if len(lm) >= 2:
+            task.ref_offsets = self._ref_offsets(f, [self.vertex_of[r] for r in lm])
+        return task
+
+    def _task_refine(self, spec: JobSpec, job: PushJob, at_f: Step) -> Task | None:
+        """The deployed robot re-homes on every landmark of the assumed geometry now that a
+        robot holds f again (equilateral on |fj|, spec 4.4), with scale correction when due."""
+        occ = self.snapshot.occupant
+        f = spec.path[-1]
+        lm, br = [], []
+        for v, b in zip(spec.deploy_landmarks, spec.deploy_bearings):
+            if v == f:
+                if at_f.state == "done" and at_f.robot >= 0:
+                    lm.append(at_f.robot)
+                    br.append(b)
+            elif v in occ and self._static(v):
+                lm.append(occ[v])
+                br.append(b)
+        if len(lm) < 2:
+            return None
+        return Task(kind="deploy", vertex=spec.new_vertex, landmarks=lm, bearings=br,
+                    scale_correct=spec.scale_correct or len(lm) == 2,
+                    timeout_s=self.cfg.task_timeout_s)
+
+    def _vertex_landmarks(self, v: int, exclude: set[int]) -> tuple[list[int], list[float]]:
+        """Occupants of v's neighbour vertices (minus ``exclude``) and v's recorded bearings."""
+        snap = self.snapshot
+        lm, br = [], []
+        for u, b in sorted(snap.nbrs.get(v, {}).items()):
+            if u in exclude or u not in snap.occupant:
+                continue
+            lm.append(snap.occupant[u])
+            br.append(b)
+        return lm, br
+
+    def _task_move(self, job: PushJob, t: int, arrived: bool) -> Task | None:
+        """Task for the robot moving p_t -> p_{t+1} (t = -1: the new robot entering p0).
+
+        Landmarks: occupants of the target's neighbours that are not moving this cycle;
+        plus, once it has arrived, the robot now at p_{t+2} (sequential fallback).
+        Returns None when no landmark at all is available (the mover then just holds).
+        """
+        path = job.spec.path
+        target = path[t + 1]
+        moving = self._moving_vertices()
+        for j in self.jobs:
+            moving.add(j.spec.new_vertex)
+        lm, br = self._vertex_landmarks(target, exclude=moving)
+        if arrived and t + 2 < len(path):
+            ahead = path[t + 2]
+            b = self.snapshot.nbrs.get(target, {}).get(ahead)
+            mover = job.step("move", t + 1) if t + 1 <= len(path) - 2 else None
+            rid = mover.robot if mover is not None else None
+            if b is not None and rid is not None:
+                lm.append(rid)
+                br.append(b)
+        if not lm:
+            return None
+        refs = []
+        if lm and all(r in self.snapshot.occupant.values() for r in lm):
+            refs = self._ref_offsets(target, [self.vertex_of[r] for r in lm])
+        task = Task(kind="goto", vertex=target, landmarks=lm, bearings=br, ref_offsets=refs,
+                    timeout_s=self.cfg.task_timeout_s)
+        if len(lm) < 2:
+            # single landmark: open-loop toward the target vertex (spec 4.6)
+            src = path[t] if t >= 0 else None
+            d = self.snapshot.nbrs.get(src, {}).get(target) if src is not None else None
+            if d is not None:
+                task.direction = d
+                task.distance = self.cfg.d0
+        return task
+
+    # ------------------------------------------------------------------ helpers
+    def _send(self, rid: int, task: Task, now: float) -> int:
+        task.task_id = self.epoch * 1_000_000 + self.next_task
+        self.next_task += 1
+        task.robot = rid
+        task.epoch = self.epoch
+        self._out.append(("task", rid, task))
+        return task.task_id
+
+    def _spawn(self, source: int, now: float) -> int:
+        rid = self.next_robot
+        self.next_robot += 1
+        kind, live = self.robot_kind(rid)
+        self.robots[rid] = Robot(rid, kind=kind, live=live, spawned_t=now)
+        self._out.append(("spawn", Spawn(robot=rid, source=source, kind=kind, live=live)))
+        return rid
+
+    def _robots_in_use(self) -> int:
+        return sum(1 for r in self.robots.values() if not r.dead)
+
+    def _robot_died(self, r: Robot, now: float, why: str) -> None:
+        log.warning("robot %d failed (%s): dropping it; its hole becomes frontier", r.rid, why)
+        r.dead = True
+        r.alive = False
+        self.failures += 1
+        self._pending_failures += 1
+        v = self.vertex_of.pop(r.rid, None)
+        if v is not None:
+            self.contact.pop(v, None)
+        self._out.append(("remove", Remove(robot=r.rid, reason=why)))
+        for job in self.jobs:
+            if any(s.robot == r.rid and s.state in ("pending", "running") for s in job.steps):
+                job.aborted = True
+                for s in job.steps:
+                    if s.robot == r.rid and s.state == "running":
+                        s.state, s.reason = "failed", "robot died"
+
+    def _heartbeat(self, now: float) -> None:
+        """Spec 6 [P]: a robot with no status for dead_after_cycles cycles is dead."""
+        if self.phase not in ("settle",):
+            return
+        for r in list(self.robots.values()):
+            if (r.alive and not r.dead and r.rid in self.vertex_of
+                    and self.cycle - r.status_cycle >= self.cfg.dead_after_cycles):
+                self._robot_died(r, now, f"no status for {self.cfg.dead_after_cycles} cycles")
+
+    def _all_settled(self) -> bool:
+        for rid in self._members():
+            st = self.robots[rid].status
+            if st.task_state == "running" or st.state not in SETTLED_STATES:
+                return False
+        return True
+
+    def _set_phase(self, phase: str, now: float) -> None:
+        self.phase = phase
+        self.phase_t = now
+
+    # ------------------------------------------------------------------ report
+    def summary(self) -> dict:
+        alive = [r for r in self.robots.values() if not r.dead]
+        return dict(certified=self.certified, cycles=self.cycle,
+                    robots_spawned=len(self.robots), robots_alive=len(alive),
+                    robots_in_complex=len(self._members()), robots_left=len(self.left),
+                    failures=self.failures, failures_healed=self.failures_healed,
+                    stop_reason=self.stop_reason)

@@ -1,0 +1,177 @@
+"""One deployment cycle's decisions, as a pure function of what the robots reported.
+
+``plan_cycle(snapshot, params, ...)`` builds the complex over the occupied vertices, the
+fence (frontier K, obstacle O), the coverage certificate, the redundant vertices (every
+T_H cycles) and the push jobs: vertex-disjoint paths from the sources and redundant
+vertices to frontier vertices, each with its deployment direction and the desired
+bearings of the new position (spec 4.4). No I/O, no positions.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+from .params import TopologyParams
+
+
+@dataclass
+class Snapshot:
+    """The swarm at the start of a cycle, keyed by vertex.
+
+    occupant: vertex -> robot id. nbrs: vertex -> {neighbour vertex: bearing (rad, in the
+    occupant's body frame)}. contact: vertex -> sticky obstacle-contact bearing (rad, body
+    frame). kinds: vertex -> robot kind. sources: source vertices present (vertex k is the
+    vertex at base station k). source_dirs: heading (rad) of each base station, used as the
+    deployment direction of a lone first robot.
+    """
+    occupant: dict[int, int]
+    nbrs: dict[int, dict[int, float]]
+    contact: dict[int, float] = field(default_factory=dict)
+    kinds: dict[int, str] = field(default_factory=dict)
+    sources: list[int] = field(default_factory=list)
+    source_dirs: list[float] = field(default_factory=list)
+
+
+@dataclass
+class JobSpec:
+    """One push: path p0..pm (vertex ids), pm = f the frontier vertex.
+
+    direction: deployment bearing at f (rad, f's occupant's body frame).
+    deploy_landmarks/deploy_bearings: the new position's desired bearings to vertices
+    (spec 4.4 assumed geometry), in f's occupant's frame.
+    new_vertex: id for the new position. enter_source: base-station index whose new robot
+    refills p0, or None when p0 is a redundant vertex (left empty).
+    reclassify_on_touch: edges (vertex pairs) that become obstacle edges if the test drive
+    touches a wall.
+    """
+    path: list[int]
+    direction: float
+    deploy_landmarks: list[int]
+    deploy_bearings: list[float]
+    new_vertex: int
+    enter_source: int | None
+    test_drive: bool = True
+    scale_correct: bool = False
+    frontier_edge: tuple[int, int] | None = None
+    reclassify_on_touch: list[tuple[int, int]] = field(default_factory=list)
+
+
+@dataclass
+class CyclePlan:
+    """edges/triangles: vertex-id tuples. frontier/obstacle: indices into edges.
+    certified: the certificate holds (a 2-chain whose boundary is the one-sided fence).
+    hole_edges: edges around an uncovered hole when not certified."""
+    edges: list[tuple[int, int]]
+    triangles: list[tuple[int, int, int]]
+    frontier: list[int]
+    obstacle: list[int]
+    certified: bool
+    hole_edges: list[tuple[int, int]] = field(default_factory=list)
+    redundant: set[int] = field(default_factory=set)
+    jobs: list[JobSpec] = field(default_factory=list)
+    open_vertices: set[int] = field(default_factory=set)  # vertices with a deployment left
+
+    @property
+    def complete(self) -> bool:
+        """K is empty (no frontier edge, no single-file/lone robot to extend) and certified."""
+        return self.certified and not self.frontier and not self.open_vertices
+
+
+def _reports(snap: Snapshot) -> dict[int, dict]:
+    out = {}
+    for v, nb in snap.nbrs.items():
+        tb = snap.contact.get(v)
+        out[v] = {"neighbours": nb, "touch": tb is not None, "touch_bearing": tb}
+    return out
+
+
+def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy: bool,
+               test_drive_failures: dict[int, float], previous_redundant: set,
+               protected: set, max_paths: int, scale_correct: bool, test_drive: bool,
+               next_vertex: int) -> CyclePlan:
+    """Decide one cycle. ``next_vertex``: the first unused vertex id (for new positions).
+
+    test_drive_failures: vertex -> bearing of a test drive that touched a wall (sticky).
+    previous_redundant: redundant vertices found earlier (used as path starts until the
+    next redundancy pass). protected: vertices that must not be counted redundant.
+    """
+    from .certificate import certify
+    from .complex import build_complex
+    from .fence import detect_fence
+    from .paths import plan_pushes
+    from .redundancy import find_redundant
+    from .targets import frontier_desired_bearings
+
+    cx = build_complex(_reports(snap))
+    lone_dir = snap.source_dirs[0] if snap.source_dirs else 0.0
+    fence = detect_fence(cx, params, test_drive_failures=test_drive_failures,
+                         default_bearing=lone_dir)
+    cert = certify(cx, fence)
+    ids = cx.ids
+    edges = [tuple(int(x) for x in ids[e]) for e in cx.edges]
+    tris = [tuple(int(x) for x in ids[t]) for t in cx.triangles]
+    plan = CyclePlan(edges=edges, triangles=tris, frontier=[int(e) for e in fence.frontier],
+                     obstacle=[int(e) for e in fence.obstacle],
+                     certified=bool(cert.certified),
+                     hole_edges=[tuple(int(x) for x in e) for e in cert.hole_edge_nodes])
+    if redundancy and cert.certified:
+        prot = set(protected) | set(snap.sources)
+        red = find_redundant(cx, fence, cert, protected=prot)
+        plan.redundant = {int(v) for v in red.redundant}
+    else:
+        plan.redundant = {v for v in previous_redundant if v in snap.occupant
+                          and v not in fence.fence_vertices}
+    # at a vertex with a frontier edge, deploy off the edge (60 deg, triangles); the
+    # single-file direction (away from the neighbours) is only for vertices without one:
+    # a corridor too narrow for triangles makes the edge deployments fail their test drive
+    deps = {}
+    for v, lst in fence.deployments.items():
+        edge_deps = tuple(d for d in lst if d.kind == "edge")
+        deps[v] = edge_deps or tuple(lst)
+    fence = dataclasses.replace(fence, deployments=deps)
+    plan.open_vertices = {int(v) for v, d in fence.deployments.items() if d}
+    if not plan.open_vertices:
+        return plan
+
+    # pushes: vertex-disjoint paths from redundant vertices and sources; a source may feed
+    # several paths in one cycle (its new robots enter one after another)
+    paths = plan_pushes(cx, fence, snap.sources, sorted(plan.redundant), params=params,
+                        max_paths=max_paths)
+    chosen = list(paths)
+    while len(chosen) < max_paths and snap.sources:
+        used = set()
+        for pth in chosen:
+            used.update(pth.vertices)
+            used.update(int(x) for x in cx.neighbours(pth.frontier))
+        extra = None
+        for s in snap.sources:
+            cand = plan_pushes(cx, fence, [s], (), params=params, max_paths=1,
+                               exclude=used - {s})
+            if cand and cand[0].frontier not in used:
+                extra = cand[0]
+                break
+        if extra is None:
+            break
+        chosen.append(extra)
+
+    vid = next_vertex
+    for pth in chosen:
+        dep = pth.deployment
+        f = pth.frontier
+        nb = snap.nbrs.get(f, {})
+        want = frontier_desired_bearings(nb, dep.bearing, d0=params.d0, rv=params.rv,
+                                         old_vertex=f)
+        start = pth.vertices[0]
+        enter = snap.sources.index(start) if start in snap.sources else None
+        on_touch = []
+        if dep.edge is not None:
+            on_touch.append(tuple(dep.edge))
+        plan.jobs.append(JobSpec(
+            path=list(pth.vertices), direction=float(dep.bearing),
+            deploy_landmarks=list(want), deploy_bearings=[want[v] for v in want],
+            new_vertex=vid, enter_source=enter, test_drive=test_drive,
+            scale_correct=scale_correct, frontier_edge=dep.edge,
+            reclassify_on_touch=on_touch))
+        vid += 1
+    return plan
