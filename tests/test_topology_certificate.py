@@ -1,0 +1,223 @@
+"""Coverage certificate: boundary(c) = z over GF(2), or a verifiable obstruction."""
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from coordinator import boundary_of, build_complex, certify, detect_fence, is_cocycle, verify_certificate
+from test_topology_geom import boundary_edges_near, lattice, reports
+
+seeds = st.integers(min_value=0, max_value=2**32 - 1)
+
+
+def _random_complex(seed, n_lo=4, n_hi=45):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(n_lo, n_hi))
+    P = rng.uniform(0, rng.uniform(1.0, 3.5), (n, 2))
+    return rng, P, build_complex(reports(P))
+
+
+def _fundamental_cycles(cx, edge_ids):
+    """A basis of the cycle space of the graph made of ``edge_ids`` (bool masks)."""
+    parent = {}
+    basis = []
+    adj = {}
+    for e in edge_ids:
+        a, b = cx.edges[e].tolist()
+        adj.setdefault(a, []).append((b, e))
+        adj.setdefault(b, []).append((a, e))
+    depth, pedge = {}, {}
+    for r in adj:
+        if r in depth:
+            continue
+        depth[r], parent[r], pedge[r] = 0, None, None
+        stack = [r]
+        while stack:
+            x = stack.pop()
+            for y, e in adj[x]:
+                if y not in depth:
+                    depth[y], parent[y], pedge[y] = depth[x] + 1, x, e
+                    stack.append(y)
+    tree = {pedge[x] for x in depth if pedge[x] is not None}
+    for e in edge_ids:
+        if e in tree:
+            continue
+        m = np.zeros(cx.n_edges, bool)
+        m[e] = True
+        a, b = cx.edges[e].tolist()
+        while a != b:
+            if depth[a] < depth[b]:
+                a, b = b, a
+            m[pedge[a]] ^= True
+            a = parent[a]
+        basis.append(m)
+    return basis
+
+
+def _gudhi_boundary_rank(cx, z_mask):
+    """dim(Z1(supp z) & B1(R)) from gudhi: beta2 of R plus a cone on z, minus beta2(R)."""
+    gudhi = pytest.importorskip("gudhi")
+
+    def beta2(cone):
+        stree = gudhi.SimplexTree()
+        for v in range(cx.n):
+            stree.insert([v])
+        for s in cx.edges.tolist() + cx.triangles.tolist():
+            stree.insert(s)
+        if cone:
+            for e in np.nonzero(z_mask)[0]:
+                stree.insert(cx.edges[e].tolist() + [cx.n])
+        stree.compute_persistence(homology_coeff_field=2, persistence_dim_max=True)
+        b = stree.betti_numbers()
+        return b[2] if len(b) > 2 else 0
+
+    return beta2(True) - beta2(False)
+
+
+def _check_against_gudhi(cx, z_mask):
+    """Certify every cycle of supp(z)'s cycle space; the number certified must be
+    2**k - 1 with k from gudhi. Returns (certified count, k)."""
+    basis = _fundamental_cycles(cx, np.nonzero(z_mask)[0].tolist())
+    if len(basis) > 4:
+        basis = basis[:4]
+        z_mask = np.logical_or.reduce(basis)
+        basis = _fundamental_cycles(cx, np.nonzero(z_mask)[0].tolist())
+        if len(basis) > 4:
+            return None
+    k = _gudhi_boundary_rank(cx, z_mask)
+    count = 0
+    for r in range(1, len(basis) + 1):
+        for combo in itertools.combinations(basis, r):
+            zz = np.logical_xor.reduce(combo)
+            cert = certify(cx, zz)
+            assert verify_certificate(cx, cert)
+            count += cert.certified
+    assert count == 2**k - 1
+    return count, k
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=seeds, frac=st.floats(0.0, 1.0))
+def test_boundaries_are_certified(seed, frac):
+    rng, P, cx = _random_complex(seed)
+    sel = np.nonzero(rng.random(cx.n_triangles) < frac)[0]
+    z = boundary_of(cx, sel)
+    cert = certify(cx, z)
+    assert cert.certified
+    assert verify_certificate(cx, cert)
+    assert np.array_equal(boundary_of(cx, cert.chain), z)
+    assert set(cert.support.tolist()) <= set(cx.ids.tolist())
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=seeds)
+def test_odd_fence_is_rejected_with_a_star_cocycle(seed):
+    rng, P, cx = _random_complex(seed)
+    if cx.n_edges == 0:
+        return
+    z = boundary_of(cx, np.nonzero(rng.random(cx.n_triangles) < 0.5)[0])
+    z[int(rng.integers(cx.n_edges))] ^= True
+    cert = certify(cx, z)
+    assert not cert.certified and cert.odd_vertices.size >= 2
+    assert verify_certificate(cx, cert)
+    assert is_cocycle(cx, cert.obstruction)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=seeds)
+def test_random_cycles_match_gudhi(seed):
+    rng, P, cx = _random_complex(seed, 6, 40)
+    if cx.n_edges == 0:
+        return
+    # random cycles: XOR of a few fundamental cycles of the whole 1-skeleton
+    basis = _fundamental_cycles(cx, list(range(cx.n_edges)))
+    if not basis:
+        return
+    pick = rng.choice(len(basis), size=min(len(basis), int(rng.integers(1, 4))), replace=False)
+    z = np.logical_xor.reduce([basis[i] for i in pick])
+    if not z.any():
+        return
+    _check_against_gudhi(cx, z)
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=seeds)
+def test_fence_decisions_match_gudhi(seed):
+    rng, P, cx = _random_complex(seed, 10, 60)
+    f = detect_fence(cx)
+    z = np.zeros(cx.n_edges, bool)
+    z[f.z] = True
+    cert = certify(cx, f)
+    assert verify_certificate(cx, cert)
+    if z.any():
+        _check_against_gudhi(cx, z)
+
+
+def _holey(seed, holes, rows=14):
+    rng = np.random.default_rng(seed)
+    P = lattice(rows, rows, 0.8, 0.02, rng)
+    for c, r in holes:
+        P = P[np.linalg.norm(P - np.asarray(c), axis=1) > r + 0.05]
+    cx = build_complex(reports(P, discs=[(c[0], c[1], r) for c, r in holes]))
+    return P, cx
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_certified_iff_every_hole_is_fenced(seed):
+    holes = [((3.0, 3.0), 0.9), ((7.5, 6.0), 1.1)]
+    P, cx = _holey(seed, holes)
+    rims, outer = [], set(range(cx.n_edges))
+    for c, r in holes:
+        near, far = boundary_edges_near(cx, P, c, r + 1.2)
+        rims.append(set(near.tolist()))
+        outer &= set(far.tolist())
+    for fenced in itertools.product([False, True], repeat=len(holes)):
+        z = set(outer)
+        for rim, on in zip(rims, fenced):
+            if on:
+                z |= rim
+        cert = certify(cx, sorted(z))
+        assert verify_certificate(cx, cert)
+        assert cert.certified == all(fenced)
+        if not cert.certified:
+            # the witness cycle is exactly the rims of the unfenced holes
+            want = set().union(*(rim for rim, on in zip(rims, fenced) if not on))
+            assert set(cert.hole_edges.tolist()) == want
+            assert len(cert.obstruction) > 0 and is_cocycle(cx, cert.obstruction)
+        else:
+            # the chain covers every triangle of the annulus-like region exactly once
+            assert cert.chain.size == cx.n_triangles
+
+
+def test_no_hole_certifies_and_a_removed_robot_opens_one():
+    rng = np.random.default_rng(7)
+    P = lattice(12, 12, 0.8, 0.02, rng)
+    cx = build_complex(reports(P))
+    f = detect_fence(cx)
+    cert = certify(cx, f)
+    assert cert.certified and cert.chain.size == cx.n_triangles
+    # drop an interior robot but keep the old outer fence: a hole no fence edge sees
+    k = int(np.argmin(np.linalg.norm(P - P.mean(0), axis=1)))
+    keep = [i for i in range(len(P)) if i != k]
+    cx2 = build_complex(reports(P[keep], ids=keep))
+    z_old = cx.edge_nodes(f.z)
+    cert2 = certify(cx2, z_old)
+    assert not cert2.certified and verify_certificate(cx2, cert2)
+    ring = {tuple(sorted(e)) for e in cert2.hole_edge_nodes.tolist()}
+    nbrs = set(cx.neighbours(k).tolist())
+    assert len(ring) == len(nbrs) and all(a in nbrs and b in nbrs for a, b in ring)
+    # the fence detected on the new complex sees the hole and certifies again
+    f2 = detect_fence(cx2)
+    assert certify(cx2, f2).certified
+
+
+def test_empty_and_disconnected():
+    P = np.vstack([lattice(4, 4, 0.8), lattice(4, 4, 0.8, origin=(20.0, 0.0))])
+    cx = build_complex(reports(P))
+    assert certify(cx, []).certified
+    f = detect_fence(cx)
+    cert = certify(cx, f)
+    assert cert.certified and verify_certificate(cx, cert) and cert.chain.size == cx.n_triangles

@@ -1,0 +1,228 @@
+"""Fence detection: hand-built cases after the thesis figures, and lattices with holes."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from coordinator import TopologyParams, build_complex, certify, detect_fence, verify_certificate, wrap
+from test_topology_geom import boundary_edges_near, lattice, reports
+
+DEG = math.pi / 180
+
+
+def _fence(P, **kw):
+    fence_kw = {k: kw.pop(k) for k in list(kw) if k in ("test_drive_failures", "default_bearing", "forced_obstacle")}
+    cx = build_complex(reports(P, **kw))
+    return cx, detect_fence(cx, **fence_kw)
+
+
+def _pairs(cx, edge_ids):
+    return {tuple(p) for p in cx.edge_nodes(edge_ids).tolist()}
+
+
+def _z_is_cycle(cx, f):
+    deg = np.bincount(cx.edges[f.z].ravel(), minlength=cx.n)
+    return not np.any(deg & 1)
+
+
+def test_single_triangle_deploys_at_60_degrees_to_the_same_spot():
+    s = 0.9
+    P = np.array([[0.0, 0.0], [s, 0.0], [s / 2, s * math.sqrt(3) / 2]])
+    cx, f = _fence(P)
+    assert _pairs(cx, f.frontier) == {(0, 1), (0, 2), (1, 2)}
+    assert f.obstacle.size == 0 and f.exceptions.size == 0
+    assert _pairs(cx, f.z) == {(0, 1), (0, 2), (1, 2)}
+    e01 = f.by_index[int(cx.edge_index(0, 1))]
+    (side,) = e01.sides
+    assert side.sigma == -1 and side.kind == "frontier"  # open side is clockwise of 1 seen from 0
+    assert side.deploy_u == pytest.approx(-60 * DEG)
+    assert side.deploy_v == pytest.approx(-120 * DEG)
+    # both endpoints send the new robot to the apex of the mirrored triangle
+    apex = np.array([s / 2, -s * math.sqrt(3) / 2])
+    for p, b in ((P[0], side.deploy_u), (P[1], side.deploy_v)):
+        q = p + s * np.array([math.cos(b), math.sin(b)])
+        assert np.linalg.norm(q - apex) < 1e-9
+    assert all(d[0].clearance == pytest.approx(60 * DEG) for d in f.deployments.values())
+
+
+def test_all_cofaces_on_one_side_is_a_fence_edge():
+    P = np.array([[0.0, 0.0], [0.9, 0.0], [0.2, 0.5], [0.45, 0.7], [0.7, 0.45]])
+    cx, f = _fence(P)
+    e = int(cx.edge_index(0, 1))
+    assert cx.edge_triangles[0][e + 1] - cx.edge_triangles[0][e] == 3
+    assert e in f.z.tolist() and e in f.frontier.tolist()
+    assert f.by_index[e].sides[0].sigma == -1
+    cert = certify(cx, f)
+    assert cert.certified and verify_certificate(cx, cert)
+
+
+def test_crossing_edge_goes_to_the_exception_set():
+    # thesis Fig. 3.5(a): {0,1} has its only triangle above, but the fan of 2 through
+    # 3 -> 5 -> 4 covers the region below it.
+    P = np.array([[0.0, 0.0], [0.95, 0.0], [0.47, 0.05], [-0.2, -0.3], [1.15, -0.3], [0.47, -0.9]])
+    cx, f = _fence(P)
+    e = int(cx.edge_index(0, 1))
+    assert _pairs(cx, [e]) == {(0, 1)}
+    assert f.exceptions.tolist() == [e]
+    assert e not in f.z.tolist() and e not in f.frontier.tolist()
+    assert _pairs(cx, f.z) == {(0, 2), (1, 2), (0, 3), (3, 5), (4, 5), (1, 4)}
+    assert _z_is_cycle(cx, f) and f.z_repair.size == 0
+    cert = certify(cx, f)
+    assert cert.certified and verify_certificate(cx, cert)
+    tri = {tuple(t) for t in cert.chain_nodes.tolist()}
+    assert (0, 1, 2) not in tri and tri == {(0, 2, 3), (2, 3, 5), (2, 4, 5), (1, 2, 4)}
+
+
+def test_fan_inside_the_triangle_is_not_an_exception():
+    # the tightened rule: a chain through a vertex inside triangle {0,1,2} does not
+    # cover the far side of {0,1}
+    P = np.array([[0.0, 0.0], [0.9, 0.0], [0.45, 0.7], [0.45, 0.25]])
+    cx, f = _fence(P)
+    e = int(cx.edge_index(0, 1))
+    assert f.exceptions.size == 0 and e in f.z.tolist()
+
+
+def _pair_with_wall(wall_y, touch_gap):
+    P = np.array([[0.0, 0.0], [0.8, 0.0], [0.4, 0.6]])
+    disc = (0.4, wall_y - 10.0, 10.0)  # a huge disc: its rim is a wall at y = wall_y
+    return _fence(P, discs=[disc], touch_gap=touch_gap)
+
+
+def test_both_touch_makes_an_obstacle_edge():
+    cx, f = _pair_with_wall(-0.05, 0.1)
+    e = int(cx.edge_index(0, 1))
+    assert e in f.obstacle.tolist() and e not in f.frontier.tolist()
+    assert f.by_index[e].sides[0].reason == "both_touch"
+    assert e in f.z.tolist()  # obstacle edges are fence edges for the certificate
+    assert 0 in f.obstacle_vertices and 0 not in {d.vertex for d in f.deployments.get(0, ()) if d.edge == (0, 1)}
+
+
+def test_one_touch_or_touch_on_the_covered_side_stays_frontier():
+    P = np.array([[0.0, 0.0], [0.8, 0.0], [0.4, 0.6]])
+    rep = reports(P)
+    rep[0].update(touch=True, touch_bearing=-90 * DEG)
+    f = detect_fence(build_complex(rep))
+    assert f.obstacle.size == 0  # only one robot touches
+    rep[1].update(touch=True, touch_bearing=100 * DEG)  # points into the covered side
+    cx = build_complex(rep)
+    f = detect_fence(cx)
+    assert f.obstacle.size == 0
+    rep[1].update(touch=True, touch_bearing=-90 * DEG)
+    f = detect_fence(build_complex(rep))
+    assert _pairs(cx, f.obstacle) == {(0, 1)}
+
+
+def test_touch_towards_a_visible_robot_is_not_an_obstacle_contact():
+    # 3 below 0 and 4 below 1 are seen by one robot each (no triangle below {0,1});
+    # contacts pointing at them are robot contacts, not wall contacts
+    P = np.array([[0.0, 0.0], [0.8, 0.0], [0.4, 0.6], [-0.15, -0.9], [0.95, -0.9]])
+    rep = reports(P)
+    for i, j in ((0, 3), (1, 4)):
+        d = P[j] - P[i]
+        rep[i].update(touch=True, touch_bearing=math.atan2(d[1], d[0]))
+    cx = build_complex(rep)
+    assert cx.n_edges == 5
+    f = detect_fence(cx)
+    assert int(cx.edge_index(0, 1)) in f.frontier.tolist() and f.obstacle.size == 0
+    for i, j in ((0, 3), (1, 4)):  # the same contacts with nobody in sight: a wall
+        rep[i]["neighbours"].pop(j)
+    f = detect_fence(build_complex(rep))
+    assert _pairs(cx, f.obstacle) == {(0, 1)}
+
+
+def _corner(angle_deg):
+    a = angle_deg * DEG
+    i, j = np.array([0.0, 0.0]), np.array([0.8, 0.0])
+    k = 0.8 * np.array([math.cos(a), math.sin(a)])
+    b = a + 50 * DEG
+    P = np.array([i, j, k, [0.4, -0.5], 0.64 * np.array([math.cos(b), math.sin(b)])])
+    mid = (j + k) / 2
+    return _fence(P, discs=[(mid[0], mid[1], 0.05)])  # an obstacle corner hides j from k
+
+
+def test_convex_corner_below_threshold_marks_both_edges_obstacle():
+    cx, f = _corner(50)
+    assert int(cx.edge_index(1, 2)) < 0  # occluded
+    assert {(0, 1), (0, 2)} <= _pairs(cx, f.obstacle)
+    for e in (int(cx.edge_index(0, 1)), int(cx.edge_index(0, 2))):
+        assert f.by_index[e].sides[0].reason == "convex_corner"
+        assert e not in f.frontier.tolist()
+    assert all(d.edge not in ((0, 1), (0, 2)) for d in f.deployments.get(0, ()))
+
+
+def test_corner_above_threshold_deploys_on_the_bisector():
+    cx, f = _corner(70)
+    e = int(cx.edge_index(0, 1))
+    assert e in f.frontier.tolist()
+    (side,) = f.by_index[e].sides
+    assert side.offset_u == pytest.approx(35 * DEG)
+    assert side.deploy_u == pytest.approx(wrap(cx.bearing(0, 1) + 35 * DEG))
+    # the threshold is pi/3 - 2 beta: with beta = 6 deg, 50 deg is no corner
+    P = TopologyParams(beta=6 * DEG)
+    cx2, _ = _corner(50)
+    f2 = detect_fence(cx2, P)
+    assert int(cx2.edge_index(0, 1)) in f2.frontier.tolist()
+
+
+def test_test_drive_failure_reclassifies_the_gap():
+    s = 0.9
+    P = np.array([[0.0, 0.0], [s, 0.0], [s / 2, s * math.sqrt(3) / 2]])
+    cx, f = _fence(P)
+    dep = [d for d in f.deployments[0] if d.edge == (0, 1)][0]
+    f2 = detect_fence(cx, test_drive_failures={0: dep.bearing})
+    assert _pairs(cx, f2.obstacle) == {(0, 1), (0, 2)}
+    assert _pairs(cx, f2.frontier) == {(1, 2)}
+    assert {f2.by_index[e].sides[0].reason for e in f2.obstacle} == {"test_drive"}
+    assert 0 not in f2.deployments
+    assert all(d.edge == (1, 2) for lst in f2.deployments.values() for d in lst)
+    # a forced obstacle edge (remembered from an earlier cycle) behaves the same
+    f3 = detect_fence(cx, forced_obstacle=[(1, 2)])
+    assert _pairs(cx, f3.obstacle) == {(1, 2)}
+
+
+def test_single_file_and_isolated_robots():
+    P = np.array([[0.0, 0.0], [0.8, 0.0], [1.6, 0.0], [10.0, 10.0]])
+    cx, f = _fence(P, default_bearing=1.0)
+    assert f.z.size == 0  # dangling edges are two-sided
+    assert _pairs(cx, f.frontier) == {(0, 1), (1, 2)}
+    d0, d2, d3 = f.deployments[0][0], f.deployments[2][0], f.deployments[3][0]
+    assert d0.kind == "single_file" and abs(wrap(d0.bearing - math.pi)) < 1e-9
+    assert d2.kind == "single_file" and abs(d2.bearing) < 1e-9
+    assert d0.clearance == pytest.approx(math.pi)
+    assert f.deployments[1][0].clearance == pytest.approx(math.pi / 2)  # middle: weak
+    assert d3.kind == "isolated" and d3.bearing == 1.0
+    assert 3 in f.frontier_vertices
+
+
+def _holey_lattice(rng, holes, jitter=0.02, s=0.8):
+    P = lattice(14, 14, s, jitter, rng)
+    keep = np.ones(len(P), bool)
+    for cxy, r in holes:
+        keep &= np.linalg.norm(P - np.asarray(cxy), axis=1) > r + 0.05
+    P = P[keep]
+    discs = [(c[0], c[1], r) for c, r in holes]
+    return P, discs
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_lattice_with_holes_fences_every_hole(seed):
+    rng = np.random.default_rng(seed)
+    holes = [((3.0, 3.0), 0.9), ((7.5, 6.0), 1.1)]
+    P, discs = _holey_lattice(rng, holes)
+    cx = build_complex(reports(P, discs=discs, touch_gap=0.9))
+    f = detect_fence(cx)
+    assert f.exceptions.size == 0 and f.z_repair.size == 0 and _z_is_cycle(cx, f)
+    # truth from the geometry: z = the outer boundary plus the rim of every hole
+    rims = set()
+    outer = set(range(cx.n_edges))
+    for c, r in holes:
+        near, far = boundary_edges_near(cx, P, c, r + 1.2)
+        rims |= set(near.tolist())
+        outer &= set(far.tolist())
+    assert set(f.z.tolist()) == rims | outer
+    assert set(f.frontier.tolist()) >= outer  # nothing touches the outside
+    assert set(f.obstacle.tolist()) <= rims and len(f.obstacle) > 0
+    cert = certify(cx, f)
+    assert cert.certified and verify_certificate(cx, cert)
