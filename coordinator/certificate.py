@@ -138,6 +138,13 @@ def verify_certificate(cx: Complex, cert: Certificate, z=None) -> bool:
     return is_cocycle(cx, ob) and bool(zm[ob].sum() & 1)
 
 
+def _support(cx: Complex, chain: np.ndarray) -> np.ndarray:
+    m = np.zeros(cx.n, dtype=bool)
+    if chain.size:
+        m[cx.triangles[chain].ravel()] = True
+    return cx.ids[m]
+
+
 def certificate_from_chain(cx: Complex, z, chain, stats: Mapping[str, Any] | None = None) -> Certificate:
     """Wrap a known chain as a Certificate; raises ValueError unless boundary(chain) = z."""
     zm = _as_edge_mask(cx, z)
@@ -147,7 +154,7 @@ def certificate_from_chain(cx: Complex, z, chain, stats: Mapping[str, Any] | Non
     chain_nodes = cx.ids[cx.triangles[chain]] if chain.size else np.zeros((0, 3), _I64)
     e = np.zeros(0, dtype=_I64)
     return Certificate(True, np.nonzero(zm)[0], chain, e, e, e, chain_nodes, np.zeros((0, 2), _I64),
-                       np.unique(chain_nodes) if chain.size else e, dict(stats or {}))
+                       _support(cx, chain), dict(stats or {}))
 
 
 def fence_cycle(cx: Complex, fence) -> np.ndarray:
@@ -159,7 +166,7 @@ def _sym_csr(rows: np.ndarray, cols: np.ndarray, n: int) -> csr_matrix:
     """Symmetric float64 CSR adjacency (for scipy csgraph with directed=True, no copies)."""
     r = np.concatenate([rows, cols])
     c = np.concatenate([cols, rows])
-    order = np.argsort(r, kind="stable")
+    order = np.argsort(r)
     indptr = np.zeros(n + 1, dtype=np.int32)
     np.cumsum(np.bincount(r, minlength=n), out=indptr[1:])
     return csr_matrix((np.ones(r.shape[0]), c[order].astype(np.int32), indptr), shape=(n, n))
@@ -192,24 +199,30 @@ def _vertex_forest(cx: Complex, seed: int | None):
     Returns (rank (n,), tree edge mask (E,)).
     """
     n, E = cx.n, cx.n_edges
-    u, v = cx.edges[:, 0], cx.edges[:, 1]
-    g = _sym_csr(u, v, n)
-    ncomp, lab = connected_components(g, directed=True, connection="weak")
+    indptr, nbr = cx.adjacency[0], cx.adjacency[1]
+    g = csr_matrix((np.ones(nbr.shape[0]), nbr.astype(np.int32), indptr.astype(np.int32)), shape=(n, n))
+    s0 = int(seed) if seed is not None and 0 <= int(seed) < n else int(np.argmax(cx.degree)) if n else 0
+    order = breadth_first_order(g, s0, directed=True, return_predecessors=False) if n else np.zeros(0, _I64)
+    if n and order.shape[0] == n:
+        ncomp, lab = 1, np.zeros(n, dtype=_I64)
+    else:
+        ncomp, lab = connected_components(g, directed=True, connection="weak")
     roots = np.full(ncomp, -1, dtype=_I64)
     roots[lab[::-1]] = np.arange(n - 1, -1, -1, dtype=_I64)  # smallest index per component
-    big = int(np.argmax(np.bincount(lab))) if n else 0
     if n and E:
-        # centre: farthest vertex from the seed, then the middle of a longest BFS path
-        s = int(seed) if seed is not None and lab[int(seed)] == big else int(roots[big])
-        order = breadth_first_order(g, s, directed=True, return_predecessors=False)
-        order, pred = breadth_first_order(g, int(order[-1]), directed=True, return_predecessors=True)
-        path = [int(order[-1])]
+        # centre the seed's component: farthest vertex, then the middle of a longest path
+        big = int(lab[s0])
+        far = int(order[-1])
+        order2, pred = breadth_first_order(g, far, directed=True, return_predecessors=True)
+        path = [int(order2[-1])]
         while pred[path[-1]] >= 0:
             path.append(int(pred[path[-1]]))
         roots[big] = path[len(path) // 2]
-    sr = n
-    g2 = _sym_csr(np.concatenate([u, np.full(ncomp, sr, dtype=_I64)]), np.concatenate([v, roots]), n + 1)
-    order, pred = breadth_first_order(g2, sr, directed=True, return_predecessors=True)
+    # one BFS from a super-root n whose only edges go to the component roots
+    ip2 = np.concatenate([indptr, [indptr[-1] + ncomp]]).astype(np.int32)
+    g2 = csr_matrix((np.ones(nbr.shape[0] + ncomp), np.concatenate([nbr, roots]).astype(np.int32), ip2),
+                    shape=(n + 1, n + 1))
+    order, pred = breadth_first_order(g2, n, directed=True, return_predecessors=True)
     rank = np.empty(n + 1, dtype=_I64)
     rank[order] = np.arange(order.shape[0], dtype=_I64)
     rank = rank[:n]
@@ -222,44 +235,57 @@ def _vertex_forest(cx: Complex, seed: int | None):
 
 
 def _lower_star_matching(cx: Complex, rank: np.ndarray, tree: np.ndarray):
-    """Match non-forest edges with triangles by BFS inside every lower link.
+    """Match non-forest edges with triangles by a spanning forest of every lower link.
 
-    Returns (match (E,) triangle id or -1, critical row ids).
+    The lower link of v (v later than its neighbours u in ``rank``) has one node per edge
+    (u, v) and one link edge per triangle (u, w, v). Level-synchronous BFS over all links
+    at once, rooted at the forest edges; nodes left over seed one more root per star
+    until every node is reached. A non-root node (u, v) reached from (w, v) is matched
+    with the triangle (u, w, v); any rooted spanning forest gives an acyclic matching.
+    Returns (match (E,) triangle id or -1, critical row ids = the extra roots).
     """
     E, T = cx.n_edges, cx.n_triangles
     match = np.full(E, -1, dtype=_I64)
-    nontree = ~tree
     if T == 0:
-        return match, np.nonzero(nontree)[0]
+        return match, np.nonzero(~tree)[0]
     tri, te = cx.triangles, cx.tri_edges
     top = np.argmax(rank[tri], axis=1)
     pick = np.array([[0, 1], [0, 2], [1, 2]], dtype=_I64)[top]
     ar = np.arange(T, dtype=_I64)
     ea = te[ar, pick[:, 0]]
     eb = te[ar, pick[:, 1]]
-    link = _sym_csr(ea, eb, E)
-    ncomp, lab = connected_components(link, directed=True, connection="weak")
-    root = np.full(ncomp, -1, dtype=_I64)
-    ids = np.arange(E, dtype=_I64)
-    root[lab[::-1]] = ids[::-1]  # default root: smallest edge id of the component
-    root[lab[tree]] = ids[tree]  # the component holding the forest edge is rooted there
-    critical = root[~tree[root]]
-    # BFS from a super-root joined to all component roots
-    sr = E
-    rows = np.concatenate([ea, np.full(ncomp, sr, dtype=_I64)])
-    cols = np.concatenate([eb, root])
-    g = _sym_csr(rows, cols, E + 1)
-    _, pred = breadth_first_order(g, sr, directed=True, return_predecessors=True)
-    pred = pred[:E]
-    node = np.nonzero((pred >= 0) & (pred != sr))[0]
-    par = pred[node]
-    a1, b1 = cx.edges[node, 0], cx.edges[node, 1]
-    a2, b2 = cx.edges[par, 0], cx.edges[par, 1]
-    third = np.where((a2 == a1) | (a2 == b1), b2, a2)
-    mt = cx.triangle_index(a1, b1, third)
-    if np.any(mt < 0):  # cannot happen: link edges come from triangles
-        raise AssertionError("lower-star matching produced a non-triangle")
-    match[node] = mt
+    owner = np.where(rank[cx.edges[:, 0]] > rank[cx.edges[:, 1]], cx.edges[:, 0], cx.edges[:, 1])
+    visited = tree.copy()
+    front = tree.copy()
+    crit: list[np.ndarray] = []
+    while True:
+        while True:
+            m1 = front[ea] & ~visited[eb]
+            m2 = front[eb] & ~visited[ea]
+            if not (m1.any() or m2.any()):
+                break
+            nodes = np.concatenate([eb[m1], ea[m2]])
+            tris = np.concatenate([ar[m1], ar[m2]])
+            nodes, first = np.unique(nodes, return_index=True)
+            visited[nodes] = True
+            match[nodes] = tris[first]
+            front[:] = False
+            front[nodes] = True
+        rest = np.nonzero(~visited)[0]
+        if rest.size == 0:
+            break
+        # one new root per star that still has unreached nodes (smallest edge id)
+        own = owner[rest]
+        o = np.argsort(own, kind="stable")
+        own_s = own[o]
+        firsts = np.ones(own_s.shape[0], dtype=bool)
+        firsts[1:] = own_s[1:] != own_s[:-1]
+        roots = rest[o[firsts]]
+        crit.append(roots)
+        visited[roots] = True
+        front[:] = False
+        front[roots] = True
+    critical = np.sort(np.concatenate(crit)) if crit else np.zeros(0, dtype=_I64)
     return match, critical
 
 
@@ -443,7 +469,7 @@ def certify(cx: Complex, fence, *, seed: int | None = None) -> Certificate:
         chain = np.sort(np.asarray(chain, dtype=_I64))
         hole = np.asarray(hole, dtype=_I64)
         chain_nodes = cx.ids[cx.triangles[chain]] if chain.size else np.zeros((0, 3), _I64)
-        support = np.unique(chain_nodes) if chain.size else np.zeros(0, _I64)
+        support = _support(cx, chain)
         return Certificate(
             certified=ok,
             z=z_ids,
@@ -492,7 +518,11 @@ def certify(cx: Complex, fence, *, seed: int | None = None) -> Certificate:
     nz = np.any(S != 0, axis=1)
     ccols, S = ccols[nz], S[nz]
     if S.shape[0]:
-        uniq, first = np.unique(S, axis=0, return_index=True)
+        if W == 1:
+            u1, first = np.unique(S[:, 0], return_index=True)
+            uniq = u1[:, None]
+        else:
+            uniq, first = np.unique(S, axis=0, return_index=True)
         reps = ccols[first]
     else:
         uniq, reps = S, ccols
