@@ -25,6 +25,7 @@ from typing import Any, Iterable
 import zenoh
 
 from .keys import Keys
+from .security import config_inserts, infer_role, secure_endpoints
 from .messages import Message, WireError, decode
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
@@ -49,7 +50,12 @@ def add_zenoh_args(parser: argparse.ArgumentParser, mode: str = "client") -> Non
                    help="experiment name scoping every key (env SWARMCOVER_SWARM; default 'default')")
     g.add_argument("--connect-timeout", type=float, default=10.0, metavar="S",
                    help="seconds to wait for the router at start (default 10)")
-    parser.set_defaults(_zenoh_mode=mode)
+    g.add_argument("--secure", metavar="DIR", default=os.environ.get("SWARMCOVER_SECURE") or None,
+                   help="security profile from `swarmcover secure init` (mutual TLS, password, "
+                        "ACL; env SWARMCOVER_SECURE); see docs/lab-network.md")
+    g.add_argument("--role", default=None, help="identity role under --secure (default: from "
+                   "the command; agents are agent-<--id>)")
+    parser.set_defaults(_zenoh_mode=mode, _zenoh_role=infer_role(parser.prog))
 
 
 def zenoh_argv(args: argparse.Namespace) -> list[str]:
@@ -64,6 +70,8 @@ def zenoh_argv(args: argparse.Namespace) -> list[str]:
     for c in args.cfg or []:
         out += ["--cfg", c]
     out += ["--swarm", args.swarm, "--connect-timeout", str(args.connect_timeout)]
+    if getattr(args, "secure", None):
+        out += ["--secure", args.secure]
     return out
 
 
@@ -89,12 +97,28 @@ def make_config(args: argparse.Namespace, mode: str | None = None) -> zenoh.Conf
         _insert(conf, "listen/endpoints", json.dumps(args.listen), "--listen")
     _insert(conf, "scouting/multicast/enabled", "true" if args.multicast_scouting else "false",
             "--multicast-scouting")
+    if getattr(args, "secure", None):
+        _apply_secure(conf, args, mode, connect)
     for c in args.cfg or []:
         if ":" not in c:
             raise ValueError(f"--cfg {c!r}: expected PATH:JSON5")
         path, value = c.split(":", 1)
         _insert(conf, path, value, f"--cfg {c!r}")
     return conf
+
+
+def _apply_secure(conf: zenoh.Config, args: argparse.Namespace, mode: str, connect) -> None:
+    """--secure DIR: tcp/ endpoints become tls/, then the profile's TLS/auth/ACL inserts."""
+    role = "router" if mode == "router" else (args.role or getattr(args, "_zenoh_role", "viewer"))
+    robot = getattr(args, "id", None) if role == "agent" else None
+    if connect:  # args keep the upgraded endpoints, so logs and READY lines say tls/
+        args.connect = connect = secure_endpoints(connect, "--connect")
+        _insert(conf, "connect/endpoints", json.dumps(connect), "--connect")
+    if args.listen:
+        args.listen = secure_endpoints(args.listen, "--listen")
+        _insert(conf, "listen/endpoints", json.dumps(args.listen), "--listen")
+    for path, value in config_inserts(args.secure, mode=mode, role=role, robot=robot):
+        _insert(conf, path, value, f"--secure {args.secure}")
 
 
 def _insert(conf: zenoh.Config, path: str, value: str, flag: str) -> None:
