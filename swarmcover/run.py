@@ -232,6 +232,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="port of the embedded router (default 7447, or a free one if taken)")
     p.add_argument("--swarm", default=os.environ.get("SWARMCOVER_SWARM"),
                    help="experiment name (default: the config's name)")
+    p.add_argument("--secure", metavar="DIR", default=None, help="lab-network security profile "
+                   "(swarmcover secure init) for every process; sets env SWARMCOVER_SECURE")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.add_argument("--log-level", default="INFO")
     return p
@@ -240,6 +242,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     setup_logging(args.log_level, "swarmcover.run")
+    if args.secure:  # children and our own session read it (bus.session --secure default)
+        os.environ["SWARMCOVER_SECURE"] = os.path.abspath(args.secure)
     try:
         cfg, resolved = resolve_config(args.config, args)
         from world.maps import build_map
