@@ -26,7 +26,7 @@ Both outcomes carry a cheap, independent check: :func:`verify_certificate`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping
+from typing import Any, Mapping
 
 import numpy as np
 from scipy.sparse import csr_matrix

@@ -9,10 +9,9 @@ are sorted, comparing local indices compares ids.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any, Iterable, Mapping
+from typing import Any, Mapping
 
 import numpy as np
 

@@ -11,8 +11,6 @@ import math
 from dataclasses import dataclass
 from typing import Mapping
 
-import numpy as np
-
 from .complex import Complex
 
 __all__ = ["GVG", "gvg_wavefront", "gvg_thin", "compute_gvg"]
