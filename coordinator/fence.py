@@ -4,14 +4,12 @@ Everything is computed from the complex, the body-frame bearings and the touch f
 stored in it: no positions.
 
 Exception set E (edges with all their triangles on one side that are nevertheless
-covered on the other side by overlapping triangles) holds an edge {i, j} when
-  (a) the tightened rule of spec 3.2: for a common neighbour k, a monotone chain
-      i -> m1 -> ... -> j of k's neighbours inside k's wedge from i to j, consecutive ones
-      adjacent, exists. We require *every* m_t to lie beyond the segment ij (the spec asks
-      for at least one): a chain that dips inside triangle ijk leaves part of ij on the
-      boundary, and marking it E broke the fence cycle on random swarms; or
-  (b) [P] the ray i -> j lies strictly inside the angle of another triangle at i, and the
-      ray j -> i likewise at j (the edge is overlapped near both ends).
+covered on the other side by overlapping triangles): the tightened rule of spec 3.2. An
+edge {i, j} is in E when, for a common neighbour k, a monotone chain i -> m1 -> ... -> j
+of k's neighbours inside k's wedge from i to j, consecutive ones adjacent, exists with
+*every* m_t beyond the segment ij (the spec asks for at least one): a chain that dips
+inside triangle ijk leaves part of ij on the boundary, and marking such edges E broke the
+fence cycle on random swarms.
 On complexes with crossing edges the one-sided edges can still leave odd-degree
 vertices; ``Fence.z`` is then repaired into a cycle (see ``Fence.z_repair``).
 
@@ -205,21 +203,6 @@ def _canon(p: int, q: int, side_at_p: int) -> int:
     return side_at_p if p < q else -side_at_p
 
 
-def _fan_covers(L: _Local, tri_at, p: int, q: int) -> bool:
-    """True if the ray from p to q lies strictly inside the angle at p of a triangle
-    (p, k, l) with k, l != q: near p the edge pq is overlapped on both sides."""
-    Bp = L.bearings(p)
-    tq = Bp[q]
-    for k, l in tri_at(p):
-        if k == q or l == q:
-            continue
-        a = wrap(Bp[l] - Bp[k])
-        b = wrap(tq - Bp[k])
-        if a * b > 0.0 and abs(b) < abs(a):
-            return True
-    return False
-
-
 def _is_exception(L: _Local, u: int, v: int, sigma: int, apexes) -> bool:
     """Tightened exception rule (spec 3.2 [P]) for edge (u, v) open on side sigma (at u)."""
     Bu, Bv = L.bearings(u), L.bearings(v)
@@ -365,19 +348,6 @@ def detect_fence(
     thr = P.corner_threshold
     n_tri_at = np.diff(cx.vertex_triangles[0])
 
-    vptr, vtri = cx.vertex_triangles
-    _tri_cache: dict[int, list[tuple[int, int]]] = {}
-
-    def tri_at(p: int):
-        r = _tri_cache.get(p)
-        if r is None:
-            r = []
-            for t in vtri[vptr[p]:vptr[p + 1]].tolist():
-                a, b, c = tri[t].tolist()
-                r.append((b, c) if a == p else ((a, c) if b == p else (a, b)))
-            _tri_cache[p] = r
-        return r
-
     exceptions: list[int] = []
     # per candidate: list of (sigma, offset_u, offset_v) and corner marks
     open_sides: dict[int, list[list]] = {}
@@ -388,10 +358,7 @@ def detect_fence(
         if len(sides) == 1:
             tris = etri[eptr[e]:eptr[e + 1]]
             apexes = (tri[tris].sum(1) - u - v).tolist()
-            if apexes and (
-                _is_exception(L, u, v, sides[0], apexes)
-                or (_fan_covers(L, tri_at, u, v) and _fan_covers(L, tri_at, v, u))
-            ):
+            if apexes and _is_exception(L, u, v, sides[0], apexes):
                 exceptions.append(e)
                 continue
         recs = []
