@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from coordinator import TopologyParams, build_complex, certify, detect_fence, verify_certificate, wrap
 from test_topology_geom import boundary_edges_near, lattice, reports
@@ -226,3 +227,34 @@ def test_lattice_with_holes_fences_every_hole(seed):
     assert set(f.obstacle.tolist()) <= rims and len(f.obstacle) > 0
     cert = certify(cx, f)
     assert cert.certified and verify_certificate(cx, cert)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(3, 80), side=st.floats(1.0, 5.0))
+def test_random_swarm_fence_invariants(seed, n, side):
+    rng = np.random.default_rng(seed)
+    P = rng.uniform(0, side, (n, 2))
+    cx = build_complex(reports(P))
+    f = detect_fence(cx)
+    assert _z_is_cycle(cx, f)  # after the repair z is always a cycle
+    assert set(f.z_raw.tolist()) <= set(f.frontier.tolist()) | set(f.obstacle.tolist())
+    assert not set(f.exceptions.tolist()) & (set(f.frontier.tolist()) | set(f.obstacle.tolist()))
+    for fe in f.edges:
+        for sd in fe.sides:
+            if sd.kind != "frontier":
+                continue
+            # the new robot goes to the open side, at most 60 deg off the edge, from both ends
+            a_u = wrap(sd.deploy_u - cx.bearing(fe.u, fe.v))
+            a_v = wrap(sd.deploy_v - cx.bearing(fe.v, fe.u))
+            assert np.sign(a_u) == sd.sigma and np.sign(a_v) == -sd.sigma
+            assert 0 < abs(a_u) <= 60 * DEG + 1e-12 and 0 < abs(a_v) <= 60 * DEG + 1e-12
+            # geometrically: no triangle on that edge has its apex on the open side
+            loc = cx.index([fe.u, fe.v])
+            u_xy, v_xy = P[loc[0]], P[loc[1]]
+            for k in cx.neighbours(fe.u).tolist():
+                if k in cx.neighbours(fe.v).tolist():
+                    w = P[cx.index_of(k)] - u_xy
+                    d = v_xy - u_xy
+                    assert np.sign(d[0] * w[1] - d[1] * w[0]) == -sd.sigma
+    cert = certify(cx, f)
+    assert verify_certificate(cx, cert)
