@@ -6,7 +6,7 @@ from .angles import circular_mean, wrap
 from .certificate import Certificate, boundary_of, certify, fence_cycle, is_cocycle, verify_certificate
 from .complex import Complex, RobotReport, add_robot, as_report, build_complex, remove_robot
 from .fence import Deployment, Fence, FenceEdge, FenceSide, detect_fence
-from .gvg import GVG, compute_gvg, gvg_thin, gvg_wavefront
+from .gvg import GVG, compute_gvg, gvg_thin, gvg_wavefront, obstacle_segments
 from .params import TopologyParams
 from .paths import PushPath, deployment_point, plan_pushes
 from .redundancy import Redundancy, find_redundant, link_is_acyclic
@@ -47,4 +47,5 @@ __all__ = [
     "gvg_wavefront",
     "gvg_thin",
     "compute_gvg",
+    "obstacle_segments",
 ]

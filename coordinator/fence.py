@@ -311,7 +311,7 @@ def detect_fence(
     *,
     test_drive_failures: Mapping[int, float] | None = None,
     forced_obstacle=(),
-    default_bearing: float = 0.0,
+    default_bearing: float | Mapping[int, float] = 0.0,
 ) -> Fence:
     """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
 
@@ -322,7 +322,7 @@ def detect_fence(
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
       e.g. edges reclassified after a failed test drive in an earlier cycle.
     default_bearing: deployment direction (rad, body frame) of a robot with no
-      neighbour at all.
+      neighbour at all; a float, or node id -> direction (missing ids use 0).
     """
     P = params or TopologyParams()
     E = cx.n_edges
@@ -468,7 +468,10 @@ def detect_fence(
             d = wrap(mean + math.pi)
             deps.setdefault(p, []).append(Deployment(int(ids[p]), d, None, 0, 0.0, L.clearance(p, d), "single_file"))
     for p in np.nonzero(cx.degree == 0)[0].tolist():
-        d = wrap(default_bearing)
+        if isinstance(default_bearing, Mapping):
+            d = wrap(float(default_bearing.get(int(ids[p]), 0.0)))
+        else:
+            d = wrap(float(default_bearing))
         deps.setdefault(p, []).append(Deployment(int(ids[p]), d, None, 0, 0.0, math.pi, "isolated"))
     # test-drive failures also drop deployments pointing into the failed gap
     for p, phi in failed.items():

@@ -13,7 +13,7 @@ from typing import Mapping
 
 from .complex import Complex
 
-__all__ = ["GVG", "gvg_wavefront", "gvg_thin", "compute_gvg"]
+__all__ = ["GVG", "gvg_wavefront", "gvg_thin", "compute_gvg", "obstacle_segments"]
 
 
 @dataclass(frozen=True)
@@ -115,3 +115,27 @@ def compute_gvg(cx: Complex, labels: Mapping[int, int], *, thin: bool = True, ke
     verts, dist, lab = gvg_wavefront(cx, labels)
     thinned = gvg_thin(cx, verts, keep_leaves=keep_leaves) if thin else verts
     return GVG(verts, thinned, dist, lab)
+
+
+def obstacle_segments(cx: Complex, obstacle_edges) -> dict[int, int]:
+    """Labels for :func:`gvg_wavefront`: node id -> index of the connected component of
+    the obstacle edges (edge ids, e.g. ``Fence.obstacle``) it lies on. Components are
+    numbered by their smallest node id. (No concave-corner splitting, spec 7.2.)"""
+    parent: dict[int, int] = {}
+
+    def find(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    for e in list(obstacle_edges):
+        a, b = (int(x) for x in cx.ids[cx.edges[int(e)]])
+        parent.setdefault(a, a)
+        parent.setdefault(b, b)
+        ra, rb = find(a), find(b)
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)
+    roots = sorted({find(a) for a in parent})
+    index = {r: i for i, r in enumerate(roots)}
+    return {a: index[find(a)] for a in sorted(parent)}

@@ -258,3 +258,10 @@ def test_random_swarm_fence_invariants(seed, n, side):
                     assert np.sign(d[0] * w[1] - d[1] * w[0]) == -sd.sigma
     cert = certify(cx, f)
     assert verify_certificate(cx, cert)
+
+
+def test_isolated_robots_use_their_own_default_direction():
+    P = np.array([[0.0, 0.0], [5.0, 0.0]])
+    cx = build_complex(reports(P))
+    f = detect_fence(cx, default_bearing={1: 2.0})
+    assert f.deployments[0][0].bearing == 0.0 and f.deployments[1][0].bearing == 2.0

@@ -203,3 +203,16 @@ def test_gvg_thinning_collapses_a_band_but_keeps_it_connected():
     # nothing left is removable: every kept vertex with >= 2 GVG neighbours has a link
     # that is not a path
     assert gvg_thin(cx, thin) == thin
+
+
+def test_obstacle_segments_label_components():
+    from coordinator import obstacle_segments
+
+    P = lattice(5, 12, 0.8)
+    cx = build_complex(reports(P))
+    f = detect_fence(cx, forced_obstacle=[(i, i + 1) for i in range(11)] + [(48 + i, 49 + i) for i in range(11)])
+    lab = obstacle_segments(cx, f.obstacle)
+    assert set(lab.values()) == {0, 1}
+    assert all(lab[i] == 0 for i in range(12)) and all(lab[48 + i] == 1 for i in range(12))
+    g = compute_gvg(cx, lab)
+    assert g.vertices == frozenset(range(24, 36))
