@@ -127,6 +127,27 @@ def acl_config(n_agents: int = DEFAULT_AGENTS) -> dict:
             "subjects": subjects, "policies": policies}
 
 
+def allows(acl: dict, name: str, flow: str, message: str, key: str) -> bool:
+    """Would ``acl`` let identity ``name`` pass ``message`` on ``key`` in ``flow``?
+
+    Mirrors the router's decision for an allow-only, default-deny ACL: a rule applies when
+    one of its key expressions includes ``key`` (zenoh.KeyExpr.includes). For tests and
+    ``show``; the router is the authority.
+    """
+    import zenoh
+    ke = zenoh.KeyExpr(key)
+    rules = {r["id"]: r for r in acl["rules"]}
+    for p in acl["policies"]:
+        if name not in p["subjects"]:
+            continue
+        for rid in p["rules"]:
+            r = rules[rid]
+            if flow in r["flows"] and message in r["messages"] and any(
+                    zenoh.KeyExpr(k).includes(ke) for k in r["key_exprs"]):
+                return r["permission"] == "allow"
+    return acl.get("default_permission") == "allow"
+
+
 def identities(n_agents: int) -> list[str]:
     return list(SINGLE_IDS) + [f"agent-{i}" for i in range(n_agents)]
 
