@@ -371,6 +371,7 @@ def first_cycle(out: Path, timeout: float = 60.0) -> dict | None:
 def restart_run(work: Path, down_s: float = 1.0, wall_timeout: float = 120.0) -> dict:
     """A small run whose router is killed (SIGKILL) at the first cycle and restarted on the
     same port ``down_s`` later."""
+    work.mkdir(parents=True, exist_ok=True)
     router = Router(free_port(), log=work / "router.log").start()
     info: dict = {}
 
@@ -393,6 +394,7 @@ def restart_run(work: Path, down_s: float = 1.0, wall_timeout: float = 120.0) ->
 def lossy_run(work: Path, loss: float, delay_s: float, jitter_s: float = 0.0,
               wall_timeout: float = 120.0, seed: int = 0, rto_s: float = 0.2) -> dict:
     """A small run with every process's link to the router through one FaultProxy."""
+    work.mkdir(parents=True, exist_ok=True)
     router = Router(free_port(), log=work / "router.log").start()
     try:
         with FaultProxy(("127.0.0.1", router.port), loss=loss, delay_s=delay_s,

@@ -59,7 +59,8 @@ def acl_config(n_agents: int = DEFAULT_AGENTS) -> dict:
     """The ``access_control`` section: default deny, one subject per identity.
 
     A subject matches a link whose password username AND certificate CN are both the
-    identity's name. Rules are allow-only; anything not listed is dropped by the router.
+    identity's name. Rules allow, except one deny that keeps the hwbridge's ROS 2
+    ``**/cmd_vel`` grant off the agents' command keys; anything not allowed is dropped.
     """
     if not isinstance(n_agents, int) or n_agents < 0 or n_agents > 100_000:
         raise ValueError(f"--agents {n_agents!r}: expected 0..100000")
@@ -105,6 +106,10 @@ def acl_config(n_agents: int = DEFAULT_AGENTS) -> dict:
     grant("hwbridge",
           _publish("hw-pub", [f"{P}/live/**", *ROS_CMD_KEYS, f"{P}/robot/*/twin_cmd",
                               f"{P}/robot/*/odom", f"{P}/world/spawn"]),
+          # ``**/cmd_vel`` would include the agents' own command keys: deny those (a deny
+          # rule wins over any allow)
+          dict(_publish("hw-not-agent-cmd", [f"{P}/robot/*/cmd_vel", f"{P}/robot/*/cmd_vel/**"]),
+               permission="deny"),
           _read("hw", ["**"]),    # mocap may arrive on any (configured) key
           _rule("hw-token", ["ingress"], ["liveliness_token"], [f"{P}/alive/hwbridge/**"]))
     grant("live",
@@ -137,15 +142,19 @@ def allows(acl: dict, name: str, flow: str, message: str, key: str) -> bool:
     import zenoh
     ke = zenoh.KeyExpr(key)
     rules = {r["id"]: r for r in acl["rules"]}
+    verdicts = set()
     for p in acl["policies"]:
         if name not in p["subjects"]:
             continue
         for rid in p["rules"]:
             r = rules[rid]
             if flow in r["flows"] and message in r["messages"] and any(
-                    zenoh.KeyExpr(k).includes(ke) for k in r["key_exprs"]):
-                return r["permission"] == "allow"
-    return acl.get("default_permission") == "allow"
+                    zenoh.KeyExpr(k).intersects(ke) if r["permission"] == "deny"
+                    else zenoh.KeyExpr(k).includes(ke) for k in r["key_exprs"]):
+                verdicts.add(r["permission"])
+    if "deny" in verdicts:
+        return False
+    return "allow" in verdicts or acl.get("default_permission") == "allow"
 
 
 def identities(n_agents: int) -> list[str]:
@@ -314,9 +323,13 @@ def describe(src: str | os.PathLike) -> str:
             subj = p["subjects"][0]
             if subj.startswith("agent-") and subj not in ("agent-0",):
                 continue
-            pub = [k for rid in p["rules"] for k in rules[rid]["key_exprs"]
-                   if "ingress" in rules[rid]["flows"] and "put" in rules[rid]["messages"]]
-            lines.append(f"  {subj:<12} may publish: {', '.join(pub) or '(nothing)'}")
+            def keys(perm):
+                return [k for rid in p["rules"] for k in rules[rid]["key_exprs"]
+                        if rules[rid]["permission"] == perm and "ingress" in rules[rid]["flows"]
+                        and "put" in rules[rid]["messages"]]
+            deny = keys("deny")
+            lines.append(f"  {subj:<12} may publish: {', '.join(keys('allow')) or '(nothing)'}"
+                         + (f" except {', '.join(deny)}" if deny else ""))
         lines.append("  (agent-<i> like agent-0, with its own id)")
     return "\n".join(lines)
 
