@@ -82,6 +82,8 @@ class Behaviour:
         self.contact_bearing = 0.0   # body frame at the time of contact (rad)
         self.contact_frame: FrameTracker | None = None
         self.contact_pinned = False
+        self.bumped_t = -1e18           # last time another robot touched us (s)
+        self.home_mark = 0.0            # dead-reckoned advance when homing started (m)
         self.return_goal: dict[int, float] | None = None  # test drive: re-home after reversing
         self.contact_moved = 0.0
         # homing
@@ -242,6 +244,8 @@ class Behaviour:
             self.last_seen[i] = n
             self.last_seen_t[i] = t
         self.obst = [a for a, r in zip(s.touch, s.touch_robot) if not r]
+        if any(s.touch_robot):
+            self.bumped_t = s.t
         if self.state == "starting":
             self._set_state("idle")
 
@@ -420,8 +424,11 @@ class Behaviour:
         valid = {l: e for l, e in errs.items() if abs(e) <= p.gate}
         mags = sorted((abs(e) for e in valid.values()), reverse=True)
         # A bump moves every bearing except those along the bump, so at least two landmarks
-        # show an error; a landmark that moved itself leaves the others unchanged.
-        if len(mags) >= 2 and mags[0] > p.deadband and mags[1] > p.second:
+        # show an error; a landmark that moved itself leaves the others unchanged. Only a
+        # felt bump (another robot touched us lately) counts: a holding robot is the
+        # swarm's static reference and must never chase neighbours that move on purpose.
+        bumped = p.hold_rehome and self.t - self.bumped_t <= p.lost_timeout_s
+        if bumped and len(mags) >= 2 and mags[0] > p.deadband and mags[1] > p.second:
             self.station = True
             self.stop.reset()
             return homing_velocity({l: self.seen[l] for l in valid}, target, p.v_max, p.g0, psi)
@@ -446,6 +453,9 @@ class Behaviour:
 
     def _enter_home(self, goal: dict[int, float], purpose: str) -> None:
         self.mode = "home"
+        self.home_mark = self.advance
+        self.stall_best = math.inf     # smallest max bearing error so far (rad)
+        self.stall_t = self.t          # when it last improved by stall_deg
         self.goal = goal
         self.purpose = purpose
         self.stop.reset()
@@ -459,6 +469,17 @@ class Behaviour:
         vis = {l: b for l, b in self.seen.items() if l in goal}
         need = min(2, len(goal))
         if len(vis) < need or not goal:
+            # too few landmarks in view: a goto with a direction hint (the bearing of the
+            # target vertex seen from the start) creeps along it, at most ``distance``, until
+            # enough of the target's landmarks come into view
+            task = self.task
+            if (goal and self.purpose == "goto" and task is not None and task.distance > 0
+                    and self.advance - self.home_mark < task.distance):
+                self.lost_since = None
+                d = wrap(task.direction + psi)
+                speed = p.scale_speed_frac * p.v_max
+                self.intent = d
+                return speed * math.cos(d), speed * math.sin(d)
             if self.lost_since is None:
                 self.lost_since = self.t
             if not goal or self.t - self.lost_since > p.lost_timeout_s:
@@ -476,6 +497,19 @@ class Behaviour:
             self.progress = 1.0 - max(0.0, emax - p.arrive) / max(self.err0 - p.arrive, 1e-9)
         if arrived and len(vis) >= need:
             self._home_done()
+            return 0.0, 0.0
+        # stall: the error has stopped shrinking (pressed against a wall, or a target that
+        # lies beyond one). A deploy accepts the spot it reached (it is on the obstacle
+        # side); a goto or a return fails with "stalled" instead of waiting for its timeout.
+        if emax < self.stall_best - math.radians(p.stall_deg):
+            self.stall_best = emax
+            self.stall_t = self.t
+        elif self.t - self.stall_t > p.stall_s and len(vis) >= need:
+            if self.purpose == "deploy":
+                self.end_reason = "stalled"
+                self._after_deploy_motion()
+            else:
+                self._home_failed("stalled")
             return 0.0, 0.0
         ux, uy = homing_velocity(vis, goal, p.v_max, p.g0, psi)
         return ux, uy

@@ -38,6 +38,11 @@ class AgentParams:
     lost_timeout_s: float = 2.0      # fail "lost landmarks" after this long with < 2 in view
     # holding (station keeping on the recorded snapshot)
     hold_window: int = 5             # ticks averaged into the bearing snapshot
+    hold_rehome: bool = False        # station keeping: home back after a felt bump. Off by
+                                     # default: a holding robot is the swarm's fixed reference,
+                                     # and re-homing on neighbours that are themselves being
+                                     # pushed made robots chase them; the coordinator re-plans
+                                     # from what robots see instead
     hold_deadband_deg: float = 3.0   # re-home when a landmark drifts beyond this ...
     hold_second_deg: float = 1.0     # ... and another beyond this (else that landmark moved)
     hold_gate_deg: float = 25.0      # a landmark off by more than this has moved: re-record it
@@ -47,10 +52,13 @@ class AgentParams:
     scale_speed_frac: float = 0.5
     scale_step_rv: float = 0.02      # back-up step of scale correction, fraction of rv
     scale_max_rv: float = 1.5        # give up moving outward after this far (fraction of rv)
-    scale_margin_steps: int = 1      # extra back-up steps once every link is back
+    scale_margin_steps: int = 6      # extra back-up steps once every link is back: 6 x 0.02 rv
+                                     # = 0.12 rv ~ eps / cos 30 deg, spacing back to ~ rv - eps
     link_lost_ticks: int = 3         # a link counts as lost after this many ticks unseen
     settle_ticks: int = 3            # ticks to wait still after each back-up step
     blocked_s: float = 1.0           # open-loop motion blocked by a wall this long ends it
+    stall_s: float = 4.0             # homing whose largest bearing error has not dropped by
+    stall_deg: float = 0.5           # stall_deg within stall_s has stalled (wall, crowd)
     contact_clear_rv: float = 0.1    # a sticky contact clears after moving this far (x rv)
     # differential drive (spec 4.8)
     k_w: float = 1.5                 # 1/s
@@ -96,6 +104,7 @@ _NOT_IN_AGENT = {"kind", "v_max", "w_max", "radius", "rv", "n_touch", "dt"}
 _POSITIVE = {"v_max", "w_max", "rv", "dt", "g0", "arrive_deg", "lost_timeout_s",
              "hold_deadband_deg", "hold_second_deg", "hold_gate_deg", "deploy_speed_frac", "test_drive_speed_frac",
              "scale_speed_frac", "scale_step_rv", "scale_max_rv", "blocked_s",
+             "stall_s", "stall_deg",
              "contact_clear_rv", "k_w", "k_v", "error_alpha"}
 
 
@@ -113,6 +122,9 @@ def _coerce(name: str, value: Any, where: str) -> Any:
             raise bad
     elif typ == "str":
         if not isinstance(value, str):
+            raise bad
+    elif typ == "bool":
+        if not isinstance(value, bool):
             raise bad
     return value
 

@@ -653,13 +653,13 @@ class Deployer:
             refs = self._ref_offsets(target, [self.vertex_of[r] for r in lm])
         task = Task(kind="goto", vertex=target, landmarks=lm, bearings=br, ref_offsets=refs,
                     timeout_s=self.cfg.task_timeout_s)
-        if len(lm) < 2:
-            # single landmark: open-loop toward the target vertex (spec 4.6)
-            src = path[t] if t >= 0 else None
-            d = self.snapshot.nbrs.get(src, {}).get(target) if src is not None else None
-            if d is not None:
-                task.direction = d
-                task.distance = self.cfg.d0
+        # direction hint: the target vertex as seen from the mover's vertex; the agent
+        # creeps along it while fewer than 2 landmarks are in view (spec 4.6)
+        src = path[t] if t >= 0 else None
+        d = self.snapshot.nbrs.get(src, {}).get(target) if src is not None else None
+        if d is not None:
+            task.direction = d
+            task.distance = self.cfg.d0
         return task
 
     # ------------------------------------------------------------------ helpers

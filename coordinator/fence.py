@@ -315,10 +315,10 @@ def detect_fence(
 ) -> Fence:
     """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
 
-    test_drive_failures: node id -> bearing (rad, that robot's body frame) of a test
-      drive that touched an obstacle (spec 3.4(iv)); the fence edges bounding that
-      angular gap at the robot become obstacle edges and its deployments into the gap
-      are dropped.
+    test_drive_failures: node id -> bearing, or list of bearings (rad, that robot's body
+      frame), of test drives that touched an obstacle (spec 3.4(iv)); its deployments
+      within 90 deg of a touch are dropped and the fence sides they served become
+      obstacle sides.
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
       e.g. edges reclassified after a failed test drive in an earlier cycle.
     default_bearing: deployment direction (rad, body frame) of a robot with no
@@ -402,20 +402,30 @@ def detect_fence(
             if _sgn(wrap(ou - L.bearings(u)[v])) == sg and _sgn(wrap(ov - L.bearings(v)[u])) == -sg:
                 marks[(e, sg)] = "both_touch"
 
-    # ---- test-drive failures
-    failed: dict[int, float] = {}
+    # ---- test-drive failures (spec 3.4(iv)): a wall felt at phi blocks every deployment
+    # direction within 90 deg of phi; the fence sides deploying into that cone become O
+    failed: dict[int, list[float]] = {}
     if test_drive_failures:
-        for nid, phi in test_drive_failures.items():
+        for nid, phis in test_drive_failures.items():
             if int(nid) not in cx:
                 continue
             p = cx.index_of(int(nid))
-            failed[p] = float(phi)
-            a, b = L.gap(p, float(phi))
-            if a is None:
+            failed[p] = [float(x) for x in (phis if isinstance(phis, (list, tuple)) else [phis])]
+    blocked_cone = math.pi / 2.0
+
+    def _blocked(p: int, d: float) -> bool:
+        return any(abs(wrap(d - phi)) < blocked_cone for phi in failed.get(p, ()))
+
+    if failed:
+        for e, recs in open_sides.items():
+            u, v = int(cx.edges[e, 0]), int(cx.edges[e, 1])
+            if u not in failed and v not in failed:
                 continue
-            for q, side_at_p in ((a, 1), (b, -1)):
-                e2 = int(cx.edge_index(p, q))
-                marks[(e2, _canon(p, q, side_at_p))] = "test_drive"
+            Bu, Bv = L.bearings(u), L.bearings(v)
+            for sg, off_u, off_v in recs:
+                if ((off_u is not None and _blocked(u, wrap(Bu[v] + off_u)))
+                        or (off_v is not None and _blocked(v, wrap(Bv[u] + off_v)))):
+                    marks[(e, sg)] = "test_drive"
 
     for pair in forced_obstacle:
         a, b = (int(x) for x in pair)
@@ -446,8 +456,6 @@ def detect_fence(
             sides.append(FenceSide(sg, "frontier", "open", du, dv, off_u, off_v))
             edge_ids = (int(ids[u]), int(ids[v]))
             for p, d, off in ((u, du, off_u), (v, dv, off_v)):
-                if single[p]:
-                    continue
                 deps.setdefault(p, []).append(
                     Deployment(int(ids[p]), d, edge_ids, sg, off, L.clearance(p, d), "edge"))
         fe = FenceEdge(int(ids[u]), int(ids[v]), e, tuple(sides))
@@ -459,14 +467,16 @@ def detect_fence(
         if len(recs) == 1:
             z.append(e)
 
-    # single-file robots (no triangle): away from the circular mean of the neighbours
+    # single-file robots (no triangle, spec 3.3): away from the circular mean of the
+    # neighbours -- the end of a chain; a robot between two opposite neighbours (resultant
+    # < 0.5) is inside the chain and has no single-file direction
     K_arr = np.array(sorted(K), dtype=_I64)
-    kv_local = set(cx.edges[K_arr].ravel().tolist()) if K_arr.size else set()
-    for p in sorted(kv_local):
-        if single[p]:
-            mean, _ = circular_mean(L.bearings(p).values())
-            d = wrap(mean + math.pi)
-            deps.setdefault(p, []).append(Deployment(int(ids[p]), d, None, 0, 0.0, L.clearance(p, d), "single_file"))
+    for p in np.nonzero(single)[0].tolist():
+        mean, res = circular_mean(L.bearings(p).values())
+        if res < 0.5:
+            continue
+        d = wrap(mean + math.pi)
+        deps.setdefault(p, []).append(Deployment(int(ids[p]), d, None, 0, 0.0, L.clearance(p, d), "single_file"))
     for p in np.nonzero(cx.degree == 0)[0].tolist():
         if isinstance(default_bearing, Mapping):
             d = wrap(float(default_bearing.get(int(ids[p]), 0.0)))
@@ -474,9 +484,9 @@ def detect_fence(
             d = wrap(float(default_bearing))
         deps.setdefault(p, []).append(Deployment(int(ids[p]), d, None, 0, 0.0, math.pi, "isolated"))
     # test-drive failures also drop deployments pointing into the failed gap
-    for p, phi in failed.items():
+    for p in failed:
         if p in deps:
-            keep = [dp for dp in deps[p] if not L.same_gap(p, phi, dp.bearing)]
+            keep = [dp for dp in deps[p] if not _blocked(p, dp.bearing)]
             if keep:
                 deps[p] = keep
             else:

@@ -300,7 +300,8 @@ def test_deploy_with_scale_correction_in_the_real_world(procs, zargs, router, tm
         k = last.ids.index(0)
         d1 = math.hypot(last.x[k] - 1.0, last.y[k] - 1.2)
         d2 = math.hypot(last.x[k] - 1.0, last.y[k] - 1.8)
-        assert 0.9 < max(d1, d2) <= 1.0, (d1, d2)
+        # out until a link broke (rv), then back 0.12 rv along the bisector: ~ rv - eps
+        assert 0.83 < max(d1, d2) < 0.93, (d1, d2)
         assert abs(last.y[k] - 1.5) < 0.05
         status.sub.undeclare()
         truth.sub.undeclare()

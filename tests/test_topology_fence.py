@@ -167,20 +167,43 @@ def test_corner_above_threshold_deploys_on_the_bisector():
     assert int(cx2.edge_index(0, 1)) in f2.frontier.tolist()
 
 
-def test_test_drive_failure_reclassifies_the_gap():
+def test_test_drive_failure_reclassifies_the_touched_side_only():
     s = 0.9
     P = np.array([[0.0, 0.0], [s, 0.0], [s / 2, s * math.sqrt(3) / 2]])
     cx, f = _fence(P)
     dep = [d for d in f.deployments[0] if d.edge == (0, 1)][0]
     f2 = detect_fence(cx, test_drive_failures={0: dep.bearing})
-    assert _pairs(cx, f2.obstacle) == {(0, 1), (0, 2)}
-    assert _pairs(cx, f2.frontier) == {(1, 2)}
+    # the wall felt below edge 0-1 blocks deployments within 90 deg of the touch: edge 0-1's
+    # open side becomes O; edge 0-2 deploys at 120 deg (180 deg from the touch) and stays K
+    assert _pairs(cx, f2.obstacle) == {(0, 1)}
+    assert _pairs(cx, f2.frontier) == {(0, 2), (1, 2)}
     assert {f2.by_index[e].sides[0].reason for e in f2.obstacle} == {"test_drive"}
-    assert 0 not in f2.deployments
-    assert all(d.edge == (1, 2) for lst in f2.deployments.values() for d in lst)
-    # a forced obstacle edge (remembered from an earlier cycle) behaves the same
+    assert all(abs(wrap(d.bearing - dep.bearing)) >= math.pi / 2 for d in f2.deployments[0])
+    assert [d.edge for d in f2.deployments[0]] == [(0, 2)]
+    # a second failure, toward the 0-2 deployment, closes that side too
+    dep2 = f2.deployments[0][0]
+    f4 = detect_fence(cx, test_drive_failures={0: [dep.bearing, dep2.bearing]})
+    assert _pairs(cx, f4.obstacle) == {(0, 1), (0, 2)}
+    assert 0 not in f4.deployments
+    # a forced obstacle edge (remembered from an earlier cycle) is an obstacle edge
     f3 = detect_fence(cx, forced_obstacle=[(1, 2)])
     assert _pairs(cx, f3.obstacle) == {(1, 2)}
+
+
+def test_dangling_edge_deploys_at_60_degrees_and_single_file_as_fallback():
+    cx = build_complex({0: {"neighbours": {1: 0.0}}, 1: {"neighbours": {0: math.pi}}})
+    f = detect_fence(cx)
+    kinds = sorted(d.kind for d in f.deployments[0])
+    assert kinds == ["edge", "edge", "single_file"]
+    offs = sorted(round(abs(wrap(d.bearing)) / DEG) for d in f.deployments[0] if d.kind == "edge")
+    assert offs == [60, 60]
+    # corridor: both 60 deg test drives touched walls -> the edge is O; the chain end still
+    # extends in single file, away from its neighbour
+    f2 = detect_fence(cx, test_drive_failures={0: [60 * DEG, -60 * DEG]})
+    assert int(cx.edge_index(0, 1)) in f2.obstacle.tolist()
+    assert [d.kind for d in f2.deployments[0]] == ["single_file"]
+    assert abs(wrap(f2.deployments[0][0].bearing - math.pi)) < 1e-9
+
 
 
 def test_single_file_and_isolated_robots():
@@ -192,7 +215,10 @@ def test_single_file_and_isolated_robots():
     assert d0.kind == "single_file" and abs(wrap(d0.bearing - math.pi)) < 1e-9
     assert d2.kind == "single_file" and abs(d2.bearing) < 1e-9
     assert d0.clearance == pytest.approx(math.pi)
-    assert f.deployments[1][0].clearance == pytest.approx(math.pi / 2)  # middle: weak
+    # the middle robot (neighbours on opposite sides) has no single-file direction, only
+    # the 60 deg deployments off its dangling edges
+    assert {d.kind for d in f.deployments[1]} == {"edge"}
+    assert f.deployments[1][0].clearance == pytest.approx(math.pi / 3)
     assert d3.kind == "isolated" and d3.bearing == 1.0
     assert 3 in f.frontier_vertices
 
