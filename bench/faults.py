@@ -151,8 +151,8 @@ class FaultProxy:
             q.put_nowait((0.0, None))
             try:
                 await sender
-            except (ConnectionError, OSError):
-                pass
+            except (ConnectionError, OSError, asyncio.CancelledError):
+                sender.cancel()
             try:
                 writer.close()
             except Exception:
@@ -169,17 +169,21 @@ class FaultProxy:
             self._loop.call_soon_threadsafe(_cut)
 
     def stop(self) -> None:
-        if self._loop is None:
+        if self._loop is None or self._loop.is_closed():
             return
 
-        def _stop():
+        async def _shutdown():
             if self._server is not None:
                 self._server.close()
             for w in list(self._writers):
                 if w.transport is not None:
                     w.transport.abort()
+            tasks = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+            for t in tasks:
+                t.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
             self._loop.stop()
-        self._loop.call_soon_threadsafe(_stop)
+        asyncio.run_coroutine_threadsafe(_shutdown(), self._loop)
         if self._thread is not None:
             self._thread.join(5)
 
@@ -270,6 +274,30 @@ def invalid_payloads(cls, n: int, rng: random.Random, decode_check=True) -> list
                 pass
         out.append(p)
     return out
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process and its reaped children (s), from /proc."""
+    try:
+        f = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return 0.0
+    return sum(int(x) for x in f[11:15]) / os.sysconf("SC_CLK_TCK")
+
+
+def wait_quiet(pids: list[int], busy: float = 0.3, window_s: float = 0.5,
+               timeout: float = 30.0) -> bool:
+    """Wait until every process uses less than ``busy`` of a core over ``window_s`` (they
+    have worked through their queues); False after ``timeout``."""
+    end = time.monotonic() + timeout
+    last = {p: cpu_seconds(p) for p in pids}
+    while time.monotonic() < end:
+        time.sleep(window_s)
+        now = {p: cpu_seconds(p) for p in pids}
+        if all(now[p] - last[p] < busy * window_s for p in pids):
+            return True
+        last = now
+    return False
 
 
 # --------------------------------------------------------------------------- runs
@@ -490,6 +518,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--wall-timeout", type=float, default=120.0)
     ap.add_argument("--work", default="/tmp/swarmcover-faults")
     args = ap.parse_args(argv)
+    # SIGTERM unwinds like Ctrl-C, so every finally below stops the processes it started
+    signal.signal(signal.SIGTERM, lambda *a: (_ for _ in ()).throw(KeyboardInterrupt()))
     os.chdir(ROOT)
     sys.path.insert(0, str(ROOT))
     work = Path(args.work)
@@ -577,7 +607,7 @@ def fuzz_campaign(work: Path, per_topic: int) -> dict:
         finally:
             s.close()
         send_s = time.monotonic() - t0
-        time.sleep(3.0)
+        wait_quiet([c.pid for c in children.values()])
         alive = {n: c.poll() is None for n, c in children.items()}
     finally:
         for c in children.values():
