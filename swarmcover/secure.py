@@ -6,6 +6,7 @@
   export DIR OUT NAME...   copy the CA certificate and only the named identities to OUT
                (what one host needs: a robot computer gets ``agent-7`` and nothing else)
   show DIR     list the identities and what each may publish
+  router-config DIR [--listen EP]   a full router config for ``zenohd -c`` (drop-in router)
 
 Then start every process with ``--secure DIR`` (see docs/lab-network.md). The ACL (see
 :func:`acl_config`) lets only the world publish bearings (``robot/*/sense``), only the
@@ -310,6 +311,29 @@ def export_profile(src: str | os.PathLike, out: str | os.PathLike, names: list[s
     return out
 
 
+def router_config(src: str | os.PathLike, listen: list[str]) -> dict:
+    """A complete router config (JSON, valid JSON5) for this profile: for ``zenohd -c FILE``
+    or ``swarmcover router --config FILE``. ``listen``: tls/ endpoints (tcp/ is upgraded)."""
+    from bus.security import secure_endpoints
+    prof = Profile.at(src)
+    for f in (prof.ca_cert, prof.router_cert, prof.router_key, prof.passwords, prof.acl):
+        if not f.is_file():
+            raise SecurityError(f"router config: missing {f}")
+    return {
+        "mode": "router",
+        "listen": {"endpoints": secure_endpoints(list(listen), "--listen")},
+        "scouting": {"multicast": {"enabled": False}},
+        "transport": {
+            "link": {"tls": {"root_ca_certificate": str(prof.ca_cert),
+                             "listen_certificate": str(prof.router_cert),
+                             "listen_private_key": str(prof.router_key),
+                             "enable_mtls": True}},
+            "auth": {"usrpwd": {"dictionary_file": str(prof.passwords)}},
+        },
+        "access_control": json.loads(prof.acl.read_text()),
+    }
+
+
 def describe(src: str | os.PathLike) -> str:
     """A human summary of a profile: identities and the keys each may publish."""
     prof = Profile.at(src)
@@ -356,6 +380,11 @@ def main(argv: list[str] | None = None) -> int:
     pe.add_argument("--router", action="store_true", help="include the router's files")
     ps = sub.add_parser("show", help="list identities and what each may publish")
     ps.add_argument("dir")
+    pr = sub.add_parser("router-config", help="print a zenohd / `swarmcover router --config` "
+                        "config file for this profile")
+    pr.add_argument("dir")
+    pr.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
+                    help="tls/ endpoint to listen on, repeatable (default tls/0.0.0.0:7447)")
     args = p.parse_args(argv)
     try:
         if args.cmd == "init":
@@ -369,6 +398,9 @@ def main(argv: list[str] | None = None) -> int:
                 p.error("export: name at least one identity or --router")
             out = export_profile(args.dir, args.out, args.names, args.router)
             print(f"exported {', '.join(args.names + (['router'] if args.router else []))} to {out}")
+        elif args.cmd == "router-config":
+            print(json.dumps(router_config(args.dir, args.listen or ["tls/0.0.0.0:7447"]),
+                             indent=1))
         else:
             print(describe(args.dir))
     except (SecurityError, ValueError, OSError) as e:

@@ -360,3 +360,35 @@ def test_a_full_small_run_under_the_profile(procs, tmp_path):
                     f"{RUN_BOUND_S:.0f} s (rc={rc}, cycles={summary.get('cycles')}; the "
                     f"coordinator is still being tuned); secured agents ticked: {ticks}")
     assert rc == 0
+
+
+def test_generated_router_config_works_as_a_drop_in_router(procs, profile, tmp_path):
+    """The file for `zenohd -c` (here loaded by `swarmcover router --config`) enforces the
+    same profile: strangers refused, a viewer's command dropped, the agent's delivered."""
+    port = free_port()
+    r = procs.swarmcover("secure", "router-config", profile, "--listen", f"tls/127.0.0.1:{port}")
+    assert r.wait(30) == 0
+    conf = tmp_path / "zenohd.json5"
+    conf.write_text(r.output())
+    router = procs.swarmcover("router", "--config", conf)
+    router.wait_line("READY router", timeout=30)
+    ep = f"tcp/127.0.0.1:{port}"
+    swarm = "t" + uuid.uuid4().hex[:8]
+    k = Keys(swarm)
+    with pytest.raises(ConnectionError):
+        _session(ep, swarm, timeout=1.0)
+    world = _session(ep, swarm, "--secure", profile, "--role", "world")
+    viewer = _session(ep, swarm, "--secure", profile, "--role", "viewer")
+    a2 = _session(ep, swarm, "--secure", profile, "--role", "agent", rid=2)
+    try:
+        sub, got = _collect(world, k.cmd_vel("*"))
+        time.sleep(1.0)
+        viewer.put(k.cmd_vel(2), CmdVel(robot=2, tick=1).encode())
+        a2.put(k.cmd_vel(2), CmdVel(robot=2, tick=2).encode())
+        time.sleep(1.0)
+        from bus.messages import decode
+        assert [decode(p).tick for _, p in got] == [2]
+        sub.undeclare()
+    finally:
+        for s in (world, viewer, a2):
+            s.close()
