@@ -25,7 +25,7 @@ import pytest
 
 from procs import ROOT
 
-RUN_BOUND_S = 60.0
+RUN_BOUND_S = 30.0
 PY = sys.executable
 CONFIG = "configs/small.toml"
 
@@ -94,6 +94,9 @@ def _in(ns: str, *argv: str) -> list[str]:
     return ["ip", "netns", "exec", ns, PY, "-m", "swarmcover", *argv]
 
 
+_VERDICT: dict = {}    # the plain run's outcome: a non-certifying coordinator is not re-waited
+
+
 @pytest.mark.parametrize("secure", [False, True], ids=["plain", "secure"])
 def test_router_world_and_agents_on_three_hosts(procs, lab, tmp_path, secure):
     from bus.keys import Keys
@@ -124,7 +127,8 @@ def test_router_world_and_agents_on_three_hosts(procs, lab, tmp_path, secure):
         sub = s.declare_subscriber(keys.spawn, mb.callback)
         coord = procs.start(_in(lab.w, "coordinator", CONFIG, "--exit-on-done", *zw))
         coord.wait_line("READY coordinator", timeout=60)
-        end = time.monotonic() + RUN_BOUND_S
+        bound = 10.0 if _VERDICT.get("certified") is False else RUN_BOUND_S
+        end = time.monotonic() + bound
         while time.monotonic() < end and coord.p.poll() is None:
             item = mb.get(0.2)
             for key, payload, _ in ([item] if item else []) + mb.drain():
@@ -147,7 +151,8 @@ def test_router_world_and_agents_on_three_hosts(procs, lab, tmp_path, secure):
         ticks.append(int(m.group(1)) if m else 0)
     # the world in ns W drove the agents in ns A through the router in ns R
     assert all(t > 0 for t in ticks), (ticks, {r: a.output()[-800:] for r, a in agents.items()})
-    if not done or done[-1] != "DONE certified=True":
-        pytest.skip(f"the coverage run did not certify within {RUN_BOUND_S:.0f} s "
+    _VERDICT["certified"] = bool(done) and done[-1] == "DONE certified=True"
+    if not _VERDICT["certified"]:
+        pytest.skip(f"the coverage run did not certify within {bound:.0f} s "
                     f"({done[-1] if done else 'still running'}; the coordinator is still "
                     f"being tuned); the three-host transport worked: agent ticks {ticks}")

@@ -336,7 +336,7 @@ def test_an_agent_cannot_publish_another_robots_command(secure_router, profile, 
 
 # --------------------------------------------------------------------------- full run
 
-RUN_BOUND_S = 60.0
+RUN_BOUND_S = 30.0
 
 
 def test_a_full_small_run_under_the_profile(procs, tmp_path):
