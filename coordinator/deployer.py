@@ -117,6 +117,8 @@ class Deployer:
         self.stop_reason = ""
         self.final_pass = False
         self.uncertified_idle = 0
+        self.no_push = 0                             # consecutive plans without a push
+        self.pending_holds: dict[int, int] = {}      # new robot -> source vertex to hold
         self._out: list = []
         self.started = False
 
@@ -187,7 +189,11 @@ class Deployer:
             self.started = True
             self.phase_t = now
             return
-        known = [r for r in self.robots.values() if r.alive and r.status is not None]
+        # a restart: robots already alive (liveliness history) must all report first
+        alive = [r for r in self.robots.values() if r.alive and not r.dead]
+        known = [r for r in alive if r.status is not None]
+        if alive and len(known) < len(alive) and now - self.phase_t < 5.0:
+            return
         if known and now - self.phase_t >= 0.5:
             log.info("resuming with %d robots already deployed", len(known))
             for r in known:
@@ -212,9 +218,16 @@ class Deployer:
             self._stop("first robot never reported (is an agent started for robot 0?)")
 
     def _phase_execute(self, now: float) -> None:
+        for rid, k in list(self.pending_holds.items()):
+            r = self.robots.get(rid)
+            if r is None or r.dead:
+                self.pending_holds.pop(rid)
+            elif r.status is not None:
+                self._send(rid, Task(kind="hold", vertex=k, timeout_s=self.cfg.task_timeout_s), now)
+                self.pending_holds.pop(rid)
         for job in self.jobs:
             self._advance_job(job, now)
-        if all(j.finished for j in self.jobs) and self._all_settled():
+        if all(j.finished for j in self.jobs) and not self.pending_holds and self._all_settled():
             self.jobs = []
             self.cycle_end_t = now
             self._set_phase("settle", now)
@@ -249,7 +262,17 @@ class Deployer:
 
     def build_snapshot(self) -> Snapshot:
         members = self._members()
-        vert = {rid: self.vertex_of[rid] for rid in members}
+        vert: dict[int, int] = {}
+        taken: set[int] = set()
+        for rid in members:
+            v = self.vertex_of[rid]
+            if v in taken:
+                # two robots claim one vertex (a restart after an interrupted push): the
+                # second one is a position of its own
+                v = self.vertex_of[rid] = self.next_vertex
+                self.next_vertex += 1
+            taken.add(v)
+            vert[rid] = v
         nbrs: dict[int, dict[int, float]] = {}
         back: dict[int, dict[int, float]] = {}
         for rid in members:
@@ -311,9 +334,27 @@ class Deployer:
                     if first is not None:
                         first.robot = -1             # the robot that entered in job.feed
             self.jobs.append(job)
-        if plan.frontier and not self.jobs:
-            log.warning("cycle %d: %d frontier edges but no feasible push", self.cycle,
-                        len(plan.frontier))
+        missing = [k for k in range(len(self.sources)) if k not in snap.occupant]
+        if missing and (plan.frontier or plan.open_vertices):
+            # the robot at a base died, or a restart found nobody there: re-establish the
+            # source vertex with a new robot from the base (paths start there)
+            for k in missing:
+                if self._robots_in_use() < self.cfg.robots_max:
+                    rid = self._spawn(k, now)
+                    self.vertex_of[rid] = k
+                    log.info("cycle %d: source %d is empty: robot %d enters to hold it",
+                             self.cycle, k, rid)
+                    self.pending_holds[rid] = k
+        if (plan.frontier or plan.open_vertices) and not self.jobs and not missing:
+            self.no_push += 1
+            log.warning("cycle %d: %d frontier edges but no feasible push (%d in a row)",
+                        self.cycle, len(plan.frontier), self.no_push)
+            if self.no_push >= 20:
+                self._stop("no feasible push for 20 cycles (frontier unreachable from the "
+                           "sources and redundant robots)")
+                return
+        else:
+            self.no_push = 0
         self.cycle += 1
         self._set_phase("execute", now)
 
@@ -427,7 +468,8 @@ class Deployer:
             if td.state == "running":
                 return
             if td.state == "failed":
-                self._test_drive_failed(job, td)
+                if not job.aborted:
+                    self._test_drive_failed(job, td)
                 return
         if dep.state == "pending":
             self._start(dep, self._task_deploy(spec, job), now)
@@ -543,9 +585,7 @@ class Deployer:
             self.contact[spec.path[-1]] = bearing
             log.info("cycle %d: test drive from vertex %d touched an obstacle: %s -> O",
                      self.cycle, spec.path[-1], spec.reclassify_on_touch)
-        for s in job.steps:
-            if s.state == "pending":
-                s.state = "cancelled"
+        self._cancel(job, "test drive touched an obstacle")
 
     # ------------------------------------------------------------------ tasks
     def _ref_offsets(self, recorder_vertex: int, landmark_vertices: list[int]) -> list[float]:
@@ -556,6 +596,8 @@ class Deployer:
             return []
         out = []
         for u in landmark_vertices:
+            if u < 0:
+                return []
             a = snap.nbrs.get(recorder_vertex, {}).get(u)
             b = snap.nbrs.get(u, {}).get(recorder_vertex)
             if a is None or b is None:
@@ -567,9 +609,20 @@ class Deployer:
         f = spec.path[-1]
         lm, br = self._vertex_landmarks(f, exclude=set())
         return Task(kind="test_drive", vertex=f, landmarks=lm, bearings=br,
-                    ref_offsets=self._ref_offsets(f, [self.vertex_of[r] for r in lm]),
+                    ref_offsets=self._ref_offsets(f, [self._snap_vertex(r) for r in lm]),
                     direction=spec.direction, distance=self.params.d_td,
                     timeout_s=self.cfg.task_timeout_s)
+
+    def _live(self, rid: int) -> bool:
+        r = self.robots.get(rid)
+        return r is not None and not r.dead
+
+    def _snap_vertex(self, rid: int) -> int:
+        """The vertex robot ``rid`` held in this cycle's snapshot (-1 if none)."""
+        for v, r in self.snapshot.occupant.items():
+            if r == rid:
+                return v
+        return -1
 
     def _static(self, v: int) -> bool:
         """Vertex v's occupant stays put this cycle (not on any path, not a new position)."""
@@ -583,7 +636,7 @@ class Deployer:
         f = spec.path[-1]
         lm, br = [], []
         for v, b in zip(spec.deploy_landmarks, spec.deploy_bearings):
-            if v != f and v in occ and self._static(v):
+            if v != f and v in occ and self._static(v) and self._live(occ[v]):
                 lm.append(occ[v])
                 br.append(b)
         dist = self.cfg.d0 - (self.params.d_td if spec.test_drive else 0.0)
@@ -591,7 +644,7 @@ class Deployer:
                     direction=spec.direction, distance=max(0.0, dist),
                     timeout_s=self.cfg.task_timeout_s)
         if len(lm) >= 2:
-            task.ref_offsets = self._ref_offsets(f, [self.vertex_of[r] for r in lm])
+            task.ref_offsets = self._ref_offsets(f, [self._snap_vertex(r) for r in lm])
         return task
 
     def _task_refine(self, spec: JobSpec, job: PushJob, at_f: Step) -> Task | None:
@@ -605,7 +658,7 @@ class Deployer:
                 if at_f.state == "done" and at_f.robot >= 0:
                     lm.append(at_f.robot)
                     br.append(b)
-            elif v in occ and self._static(v):
+            elif v in occ and self._static(v) and self._live(occ[v]):
                 lm.append(occ[v])
                 br.append(b)
         if len(lm) < 2:
@@ -619,7 +672,7 @@ class Deployer:
         snap = self.snapshot
         lm, br = [], []
         for u, b in sorted(snap.nbrs.get(v, {}).items()):
-            if u in exclude or u not in snap.occupant:
+            if u in exclude or u not in snap.occupant or not self._live(snap.occupant[u]):
                 continue
             lm.append(snap.occupant[u])
             br.append(b)
@@ -648,9 +701,7 @@ class Deployer:
                 br.append(b)
         if not lm:
             return None
-        refs = []
-        if lm and all(r in self.snapshot.occupant.values() for r in lm):
-            refs = self._ref_offsets(target, [self.vertex_of[r] for r in lm])
+        refs = self._ref_offsets(target, [self._snap_vertex(r) for r in lm])
         task = Task(kind="goto", vertex=target, landmarks=lm, bearings=br, ref_offsets=refs,
                     timeout_s=self.cfg.task_timeout_s)
         # direction hint: the target vertex as seen from the mover's vertex; the agent

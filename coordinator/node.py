@@ -122,7 +122,7 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
     pub_remove = publisher(session, keys.remove)
     task_pubs: dict[int, zenoh.Publisher] = {}
     now = 0.0
-    last_wall = time.monotonic()
+    clocked = False
     print(f"READY coordinator epoch {epoch}", flush=True)
     log.info("coordinator up: swarm %s, rv %.2f, %d source(s), push_mode %s", keys.swarm,
              ccfg.rv, len(headings), ccfg.push_mode)
@@ -142,7 +142,6 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
                     msg = rx.decode(key, payload, Clock)
                     if msg is not None:
                         now = max(now, msg.t)
-                        last_wall = time.monotonic()
                     continue
                 msg = rx.decode(key, payload, Status)
                 if msg is None:
@@ -152,6 +151,10 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
                     continue
                 now = max(now, msg.t)
                 dep.on_status(msg)
+            if not clocked:
+                clocked = any(keys.relative(k) == "world/clock" for k, _, _ in items)
+                if not clocked:
+                    continue  # the deployer's time is the world's: wait for its clock
             for action in dep.step(now):
                 what = action[0]
                 if what == "task":

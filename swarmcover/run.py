@@ -33,6 +33,7 @@ from bus.messages import Complex, Spawn, Truth, WorldInfo
 from bus.session import Mailbox, Receiver, Shutdown, add_zenoh_args, open_session, setup_logging
 
 log = logging.getLogger("swarmcover.run")
+MAX_COORDINATOR_RESTARTS = 3
 PY = [sys.executable, "-m", "swarmcover"]
 
 
@@ -45,6 +46,7 @@ class Child:
         self.name = name
         self.log_path = logdir / f"{name}.log"
         self._f = open(self.log_path, "ab", buffering=0)
+        self._offset = self._f.tell()  # a restarted child appends: READY is looked for after
         self.p = subprocess.Popen(argv, stdout=self._f, stderr=subprocess.STDOUT,
                                   stdin=subprocess.DEVNULL, env=env, start_new_session=True)
 
@@ -55,7 +57,9 @@ class Child:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             try:
-                text = self.log_path.read_text(errors="replace")
+                with open(self.log_path, "rb") as f:
+                    f.seek(self._offset)
+                    text = f.read().decode(errors="replace")
             except OSError:
                 text = ""
             if needle in text:
@@ -334,6 +338,7 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
     cycles_f = open(out / "cycles.jsonl", "w")
     spawned = 0
     progress = Progress(label=cfg.name, enabled=not args.quiet, every_s=10.0)
+    restarts = 0
     coverage = 0.0
     final_state = None
     from world.groundtruth import coverage_fraction
@@ -384,11 +389,21 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                         final_state = cx.state
             if final_state is not None:
                 break
-            for name in ("world", "coordinator"):
-                c = launcher.children[name]
-                if not c.alive():
-                    raise RuntimeError(f"the {name} process exited ({c.p.returncode}); "
-                                       f"see {c.log_path}")
+            c = launcher.children["world"]
+            if not c.alive():
+                raise RuntimeError(f"the world process exited ({c.p.returncode}); see {c.log_path}")
+            c = launcher.children["coordinator"]
+            if not c.alive():
+                # a coordinator rebuilds its state from the agents' statuses: restart it
+                restarts += 1
+                if restarts > MAX_COORDINATOR_RESTARTS:
+                    raise RuntimeError(f"the coordinator exited ({c.p.returncode}) "
+                                       f"{restarts} times; see {c.log_path}")
+                log.warning("the coordinator exited (%s): restarting it (%d/%d)",
+                            c.p.returncode, restarts, MAX_COORDINATOR_RESTARTS)
+                c.close()
+                launcher.start("coordinator", ["coordinator", conf_path]) \
+                    .wait_ready("READY coordinator", 60)
             if time.monotonic() - t_wall0 > args.wall_timeout:
                 state["reason"] = f"wall timeout {args.wall_timeout:.0f} s"
                 break
@@ -410,6 +425,7 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                  sim_time_s=(last_truth.t if last_truth else 0.0),
                  wall_time_s=time.monotonic() - t_wall0, robots_spawned=spawned,
                  failures_healed=_failures_healed(out / "logs" / "coordinator.log"),
+                 coordinator_restarts=restarts,
                  config=args.config, seed=cfg.world.seed, mode=cfg.world.mode)
     if state["reason"]:
         extra["stop_reason"] = state["reason"]

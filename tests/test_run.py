@@ -1,0 +1,104 @@
+"""`swarmcover run` end to end: a router, the world, the coordinator and one OS process per
+robot over real Zenoh, in lockstep, on the tiny map."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import time
+from pathlib import Path
+
+import pytest
+
+from procs import free_port, pids_with
+
+
+def _run(procs, out: Path, *extra):
+    return procs.swarmcover("run", "configs/tiny.toml", "--out", str(out), "--quiet",
+                            "--port", str(free_port()), *extra)
+
+
+def _of_run(out: Path, needle: str) -> list[int]:
+    """Pids of this run's processes whose command line contains ``needle``."""
+    mine = set(pids_with(str(out)))
+    return [pid for pid in pids_with(needle) if pid in mine]
+
+
+def _summary(out: Path) -> dict:
+    return json.loads((out / "summary.json").read_text())
+
+
+def _wait_cycle(out: Path, cycle: int, timeout: float) -> dict:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        f = out / "cycles.jsonl"
+        if f.exists():
+            rows = [json.loads(x) for x in f.read_text().splitlines() if x.strip()]
+            if rows and rows[-1]["cycle"] >= cycle:
+                return rows[-1]
+        time.sleep(0.2)
+    raise AssertionError(f"cycle {cycle} not reached in {timeout} s")
+
+
+def _no_leftovers(out: Path, timeout: float = 10.0) -> None:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end and pids_with(str(out)):
+        time.sleep(0.2)
+    assert not pids_with(str(out)), "processes of the run are still alive"
+
+
+@pytest.mark.timeout(300)
+def test_run_certifies_and_writes_the_report(procs, tmp_path):
+    out = tmp_path / "run"
+    p = _run(procs, out)
+    assert p.wait(280) == 0, p.output()[-3000:]
+    s = _summary(out)
+    for key in ("certified", "robots_used", "ideal_count", "ratio", "mean_spacing",
+                "ideal_count_same_spacing", "ratio_same_spacing", "coverage", "cycles",
+                "sim_time_s", "wall_time_s", "failures_healed"):
+        assert key in s, key
+    assert s["certified"] is True and s["coverage"] >= 0.99
+    assert s["ideal_count"] == 7 and s["robots_used"] >= s["ideal_count"]
+    assert 0.3 < s["mean_spacing"] <= 1.0
+    assert (out / "final.png").stat().st_size > 10_000
+    rows = [json.loads(x) for x in (out / "cycles.jsonl").read_text().splitlines()]
+    assert rows[-1]["state"] == "certified" and rows[-1]["frontier"] == 0
+    assert [r["cycle"] for r in rows] == sorted(r["cycle"] for r in rows)
+    logs = {f.name for f in (out / "logs").iterdir()}
+    assert {"router.log", "world.log", "coordinator.log", "agent-0.log"} <= logs
+    _no_leftovers(out)
+
+
+@pytest.mark.timeout(120)
+def test_ctrl_c_stops_every_process(procs, tmp_path):
+    out = tmp_path / "run"
+    p = _run(procs, out)
+    _wait_cycle(out, 2, 60)
+    assert len(pids_with(str(out))) >= 4  # router, world, coordinator, agents
+    p.signal(signal.SIGINT)
+    assert p.wait(40) == 130
+    _no_leftovers(out)
+
+
+@pytest.mark.timeout(300)
+def test_killed_agents_and_coordinator_are_healed(procs, tmp_path):
+    """10% of the agents die mid-run (here: one of ~10), then the coordinator is killed;
+    run restarts it, it rebuilds from the agents' statuses, and the holes are refilled."""
+    out = tmp_path / "run"
+    p = _run(procs, out)
+    _wait_cycle(out, 8, 150)
+    agent = _of_run(out, "agent --id 3 ")
+    assert len(agent) == 1, "agent 3 is not running"
+    os.kill(agent[0], signal.SIGKILL)
+    _wait_cycle(out, 10, 120)
+    coord = _of_run(out, "swarmcover coordinator")
+    assert len(coord) == 1
+    os.kill(coord[0], signal.SIGKILL)
+    assert p.wait(280) == 0, p.output()[-3000:]
+    s = _summary(out)
+    assert s["certified"] and s["coverage"] >= 0.99
+    assert s["coordinator_restarts"] == 1
+    log = (out / "logs" / "coordinator.log").read_text()
+    assert "robot 3 failed" in log
+    assert "resuming with" in log
+    _no_leftovers(out)
