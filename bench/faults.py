@@ -539,6 +539,7 @@ def main(argv: list[str] | None = None) -> int:
                               wall_timeout=args.wall_timeout, seed=rep, rto_s=args.rto_ms / 1000)
                 rows.append(dict(loss=loss, rep=rep, certified=r["certified"],
                                  wall_s=round(r["wall_s"], 2), sim_s=r.get("sim_time_s"),
+                                 sim_per_wall=round((r.get("sim_time_s") or 0) / r["wall_s"], 3),
                                  robots=r.get("robots_used"), lost=r["link"]["lost"],
                                  segments=r["link"]["segments"]))
                 _log(f"loss {loss:.3f} rep {rep}: {rows[-1]}")
@@ -553,7 +554,8 @@ def main(argv: list[str] | None = None) -> int:
             r = lossy_run(work / f"delay-{dms}", 0.0, dms / 1000, jitter_s=dms / 10000,
                           wall_timeout=args.wall_timeout)
             rows.append(dict(delay_ms=dms, certified=r["certified"], wall_s=round(r["wall_s"], 2),
-                             sim_s=r.get("sim_time_s"), robots=r.get("robots_used")))
+                             sim_s=r.get("sim_time_s"), robots=r.get("robots_used"),
+                             sim_per_wall=round((r.get("sim_time_s") or 0) / r["wall_s"], 3)))
             _log(f"delay {dms} ms: {rows[-1]}")
         ok = [r["delay_ms"] for r in rows if r["certified"]]
         result["delay"] = dict(rows=rows, max_certified_delay_ms=max(ok) if ok else None)

@@ -166,6 +166,15 @@ def test_a_router_restarted_mid_run_the_processes_reconnect(tmp_path):
     # the coordinator's complexes and the world's clock reach the run again
     assert after, "nothing arrived after the router came back"
     assert max(x["t"] for x in after) > row["t"]
+    # the world and the agents carried on together: ticks well past the outage
+    import re
+    logs = tmp_path / "run/logs"
+    world = json.loads(re.search(r"world stopped: (\{.*\})", (logs / "world.log").read_text())[1])
+    ticks = [int(re.search(r"stopped: (\d+) ticks", f.read_text())[1])
+             for f in logs.glob("agent-*.log")]
+    dt = world["t"] / max(1, world["ticks"])
+    assert world["t"] > row["t"] + 1.0, world
+    assert ticks and max(ticks) * dt > row["t"] + 1.0, (ticks, row)
     _guard(r, "router restart")
     assert r["rc"] == 0
 
