@@ -4,6 +4,8 @@ Library (used by tests/test_lab_faults.py) and benchmark (``python bench/faults.
 
   loss     sweep per-segment loss on every link of a small run (through :class:`FaultProxy`)
            and report at what loss the run stops certifying within the wall bound
+  netns-loss  the same with real packet loss: router and clients in two network namespaces,
+           iptables ``statistic`` drops in the router's (needs root, iproute2, iptables)
   delay    the same for one-way delay
   restart  kill -9 the router mid-run and restart it on the same port; does the run finish?
   fuzz     N invalid payloads on every topic against world, coordinator, agent, hwbridge and
@@ -26,6 +28,7 @@ import json
 import math
 import os
 import random
+import shutil
 import signal
 import socket
 import subprocess
@@ -103,12 +106,15 @@ class FaultProxy:
     async def _client(self, cr, cw) -> None:
         try:
             ur, uw = await asyncio.open_connection(*self.upstream)
-        except OSError:
+        except (OSError, asyncio.CancelledError):
             cw.close()
             return
         self.stats["connections"] += 1
         self._writers |= {cw, uw}
-        await asyncio.gather(self._pipe(cr, uw), self._pipe(ur, cw), return_exceptions=True)
+        try:
+            await asyncio.gather(self._pipe(cr, uw), self._pipe(ur, cw), return_exceptions=True)
+        except asyncio.CancelledError:
+            pass            # stop(): the proxy is going away
         self._writers -= {cw, uw}
 
     async def _pipe(self, reader, writer) -> None:
@@ -311,17 +317,20 @@ def free_port() -> int:
 class Router:
     """A ``swarmcover router`` child on a fixed port; restartable."""
 
-    def __init__(self, port: int, extra: list[str] | None = None, log: Path | None = None):
+    def __init__(self, port: int, extra: list[str] | None = None, log: Path | None = None,
+                 host: str = "127.0.0.1", prefix: list[str] | None = None):
         self.port, self.extra, self.log = port, extra or [], log
+        self.host, self.prefix = host, prefix or []
         self.p: subprocess.Popen | None = None
 
     @property
     def endpoint(self) -> str:
-        return f"tcp/127.0.0.1:{self.port}"
+        return f"tcp/{self.host}:{self.port}"
 
     def start(self, timeout: float = 20.0) -> "Router":
         out = open(self.log, "ab") if self.log else subprocess.DEVNULL
-        self.p = subprocess.Popen(PY + ["router", "--listen", self.endpoint] + self.extra,
+        self.p = subprocess.Popen(self.prefix + PY + ["router", "--listen", self.endpoint]
+                                  + self.extra,
                                   stdout=subprocess.PIPE, stderr=out, stdin=subprocess.DEVNULL,
                                   cwd=str(ROOT), start_new_session=True, text=True)
         end = time.monotonic() + timeout
@@ -349,11 +358,12 @@ class Router:
 
 def small_run(out: Path, router_endpoint: str, config: str = "configs/small.toml",
               wall_timeout: float = 120.0, extra: list[str] | None = None,
-              on_start=None) -> dict:
+              on_start=None, prefix: list[str] | None = None) -> dict:
     """``swarmcover run CONFIG --router ENDPOINT``; returns its summary plus rc and wall time.
-    ``on_start(proc, out)`` runs in this thread while the run goes (fault scripts)."""
+    ``on_start(proc, out)`` runs in this thread while the run goes (fault scripts);
+    ``prefix`` wraps the command (e.g. ``ip netns exec NS``)."""
     t0 = time.monotonic()
-    argv = PY + ["run", config, "--router", router_endpoint, "--out", str(out), "--quiet",
+    argv = (prefix or []) + PY + ["run", config, "--router", router_endpoint, "--out", str(out), "--quiet",
                  "--wall-timeout", str(wall_timeout)] + (extra or [])
     with open(out.parent / f"{out.name}.out", "w") as f:
         p = subprocess.Popen(argv, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
@@ -435,6 +445,82 @@ def lossy_run(work: Path, loss: float, delay_s: float, jitter_s: float = 0.0,
     return res
 
 
+class NetnsPair:
+    """Two network namespaces joined by one veth pair: the router's (10.200.b.1) and the
+    clients' (10.200.b.2). ``loss(p)`` makes the router's namespace drop each packet in and
+    out with probability p (iptables ``statistic`` match: real kernel packet loss, real TCP
+    recovery). Needs root, iproute2 and iptables; ``up()`` raises OSError otherwise."""
+
+    def __init__(self):
+        tag = f"{os.getpid() % 10000:04d}"
+        b = 100 + (os.getpid() % 48) * 3 + 2
+        self.r, self.c = f"scf{tag}r", f"scf{tag}c"
+        self.rv, self.cv = f"scf{tag}r0", f"scf{tag}c0"
+        self.router_ip, self.client_ip = f"10.200.{b}.1", f"10.200.{b}.2"
+        self.made: list[str] = []
+
+    @staticmethod
+    def _run(*cmd: str) -> None:
+        r = subprocess.run(list(cmd), capture_output=True, text=True, timeout=15)
+        if r.returncode:
+            raise OSError(f"{' '.join(cmd)}: {r.stderr.strip()}")
+
+    def exec(self, ns: str) -> list[str]:
+        return ["ip", "netns", "exec", ns]
+
+    def up(self) -> "NetnsPair":
+        if os.geteuid() != 0:
+            raise OSError("network namespaces need root")
+        for tool in ("ip", "iptables"):
+            if shutil.which(tool) is None:
+                raise OSError(f"no `{tool}` (Debian packages iproute2, iptables)")
+        for ns in (self.r, self.c):
+            subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=15)
+            self._run("ip", "netns", "add", ns)
+            self.made.append(ns)
+            self._run("ip", "-n", ns, "link", "set", "lo", "up")
+        self._run("ip", "link", "add", self.rv, "type", "veth", "peer", "name", self.cv)
+        self._run("ip", "link", "set", self.rv, "netns", self.r)
+        self._run("ip", "link", "set", self.cv, "netns", self.c)
+        self._run("ip", "-n", self.r, "addr", "add", self.router_ip + "/24", "dev", self.rv)
+        self._run("ip", "-n", self.c, "addr", "add", self.client_ip + "/24", "dev", self.cv)
+        self._run("ip", "-n", self.r, "link", "set", self.rv, "up")
+        self._run("ip", "-n", self.c, "link", "set", self.cv, "up")
+        return self
+
+    def loss(self, p: float) -> None:
+        for chain in ("INPUT", "OUTPUT"):
+            self._run(*self.exec(self.r), "iptables", "-F", chain)
+            if p > 0:
+                self._run(*self.exec(self.r), "iptables", "-A", chain, "-i" if chain == "INPUT"
+                          else "-o", self.rv, "-m", "statistic", "--mode", "random",
+                          "--probability", f"{p:.6f}", "-j", "DROP")
+
+    def down(self) -> None:
+        for ns in self.made:
+            subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=15)
+        self.made = []
+
+
+def netns_loss_run(work: Path, loss: float, wall_timeout: float = 120.0) -> dict:
+    """A small run whose processes reach the router over a veth with real packet loss."""
+    work.mkdir(parents=True, exist_ok=True)
+    net = NetnsPair().up()
+    try:
+        net.loss(loss)
+        router = Router(7447, log=work / "router.log", host=net.router_ip,
+                        prefix=net.exec(net.r)).start()
+        try:
+            res = small_run(work / "run", router.endpoint, wall_timeout=wall_timeout,
+                            prefix=net.exec(net.c))
+        finally:
+            router.kill(signal.SIGTERM)
+    finally:
+        net.down()
+    res["link"] = dict(loss=loss, kind="netns+iptables")
+    return res
+
+
 # --------------------------------------------------------------------------- fuzz campaign
 
 FUZZ_CONFIG = "configs/mixed.toml"
@@ -505,7 +591,7 @@ def _log(*a) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="bench/faults.py", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("what", choices=("loss", "delay", "restart", "fuzz", "all"))
+    ap.add_argument("what", choices=("loss", "netns-loss", "delay", "restart", "fuzz", "all"))
     ap.add_argument("--losses", default="0,0.01,0.02,0.05,0.1,0.15,0.2,0.3",
                     help="per-segment loss levels for the loss sweep")
     ap.add_argument("--delays-ms", default="0,10,50,100,200,400",
@@ -548,6 +634,28 @@ def main(argv: list[str] | None = None) -> int:
         result["loss"] = dict(rows=rows, rto_ms=args.rto_ms, base_delay_ms=args.base_delay_ms,
                               max_certified_loss=max(ok) if ok else None,
                               first_failed_loss=bad[0] if bad else None)
+    if args.what in ("netns-loss", "all"):
+        rows = []
+        for loss in [float(x) for x in args.losses.split(",")]:
+            for rep in range(args.repeats):
+                try:
+                    r = netns_loss_run(work / f"nloss-{loss}-{rep}", loss, args.wall_timeout)
+                except OSError as e:
+                    _log(f"netns-loss: skipped ({e})")
+                    rows = None
+                    break
+                rows.append(dict(loss=loss, rep=rep, certified=r["certified"],
+                                 wall_s=round(r["wall_s"], 2), sim_s=r.get("sim_time_s"),
+                                 sim_per_wall=round((r.get("sim_time_s") or 0) / r["wall_s"], 3),
+                                 robots=r.get("robots_used")))
+                _log(f"netns loss {loss:.3f} rep {rep}: {rows[-1]}")
+            if rows is None:
+                break
+        if rows is not None:
+            ok = [r["loss"] for r in rows if r["certified"]]
+            bad = sorted({r["loss"] for r in rows if not r["certified"]})
+            result["netns_loss"] = dict(rows=rows, max_certified_loss=max(ok) if ok else None,
+                                        first_failed_loss=bad[0] if bad else None)
     if args.what in ("delay", "all"):
         rows = []
         for dms in [float(x) for x in args.delays_ms.split(",")]:
