@@ -554,6 +554,12 @@ class Behaviour:
             self._open_done()
             return 0.0, 0.0
         if self.purpose == "test" and any(blocks(d, c, p.tau) for c in self.obst):
+            task = self.task
+            if task is not None and 0 < task.keep_after <= done:
+                # far enough out: the robot stays against the wall as the new vertex
+                self.contact_pinned = True
+                self._finish("done", "wall")
+                return 0.0, 0.0
             self._test_touch()
             return getattr(self, "_tick_" + self.mode)()
         if self.single is not None and self.n - self.last_seen.get(self.single, -10**9) \

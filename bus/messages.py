@@ -372,8 +372,9 @@ class Task(Message):
     deploy: like goto, with bearings from the assumed geometry (spec 4.4); with fewer than 2
       landmarks, open-loop along ``direction`` for ``distance``; then scale correction if
       ``scale_correct``.
-    test_drive: open-loop along ``direction`` for ``distance``; on touch, home back to
-      ``bearings`` and fail with reason "touch".
+    test_drive: open-loop along ``direction`` for ``distance``; on a touch before
+      ``keep_after`` metres, home back to ``bearings`` and fail with reason "touch"; on a
+      touch after it, stop there: done with reason "wall" (the robot is the new vertex).
     leave: stop and idle (redundant robot).
     ref_offsets: per landmark, heading of the reference frame minus the landmark's heading
       (rad), for frame alignment (spec 4.7); [] means frames are parallel (psi = 0).
@@ -390,6 +391,8 @@ class Task(Message):
     distance: float = f_float(0.0, 1e4)
     scale_correct: bool = f_bool()
     timeout_s: float = f_float(0.0, 1e6, default=60.0)
+    keep_after: float = f_float(0.0, 1e4)  # test_drive: a touch beyond this (m) ends it "done
+                                           # (wall)" with the robot kept there; 0 = never
 
     def _post_check(self):
         if self.ref_offsets and len(self.ref_offsets) != len(self.landmarks):

@@ -471,6 +471,13 @@ class Deployer:
                 if not job.aborted:
                     self._test_drive_failed(job, td)
                 return
+            if td.reason == "wall" and dep.state == "pending":
+                # the test drive ended against a wall far enough out: that is the new vertex
+                dep.state, dep.reason = "done", "wall"
+                self._step_done(job, dep)
+                ref = job.step("refine")
+                if ref is not None and ref.state == "pending":
+                    ref.state, ref.reason = "cancelled", "at a wall"
         if dep.state == "pending":
             self._start(dep, self._task_deploy(spec, job), now)
         sequential = self.cfg.push_mode == "sequential"
@@ -557,7 +564,7 @@ class Deployer:
             for s in job.steps:
                 if s.robot == r.rid and s.task_id == st.task_id and s.state == "running":
                     if st.task_state == "done":
-                        s.state = "done"
+                        s.state, s.reason = "done", st.reason
                         self._step_done(job, s)
                     elif st.task_state == "failed":
                         s.state, s.reason = "failed", st.reason
@@ -611,6 +618,7 @@ class Deployer:
         return Task(kind="test_drive", vertex=f, landmarks=lm, bearings=br,
                     ref_offsets=self._ref_offsets(f, [self._snap_vertex(r) for r in lm]),
                     direction=spec.direction, distance=self.params.d_td,
+                    keep_after=self.cfg.wall_keep_rv * self.cfg.rv,
                     timeout_s=self.cfg.task_timeout_s)
 
     def _live(self, rid: int) -> bool:
