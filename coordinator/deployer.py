@@ -289,8 +289,35 @@ class Deployer:
                         sources=[k for k in range(len(self.sources)) if k in occupant],
                         source_dirs=self.sources)
 
+    def _strays(self, snap: Snapshot) -> set[int]:
+        """Vertices in components of the (mutual-visibility) graph that hold no source: robots
+        that lost the swarm (a failed move, a failure that cut the graph). No path can reach
+        them, so their frontier could never close; they are sent away instead."""
+        present = [k for k in range(len(self.sources)) if k in snap.occupant]
+        if not present:
+            return set()
+        seen = set(present)
+        stack = list(present)
+        while stack:
+            v = stack.pop()
+            for u in snap.nbrs.get(v, {}):
+                if u not in seen and v in snap.nbrs.get(u, {}):
+                    seen.add(u)
+                    stack.append(u)
+        return set(snap.occupant) - seen
+
     def _plan(self, now: float) -> None:
         snap = self.snapshot = self.build_snapshot()
+        strays = self._strays(snap)
+        if strays:
+            for v in sorted(strays):
+                rid = snap.occupant[v]
+                self.left.add(rid)
+                self._send(rid, Task(kind="leave", vertex=-1, timeout_s=self.cfg.task_timeout_s),
+                           now)
+            log.warning("cycle %d: robots %s are cut off from every source: sent away",
+                        self.cycle, sorted(snap.occupant[v] for v in strays))
+            snap = self.snapshot = self.build_snapshot()
         run_redundancy = (self.cycle % max(1, self.cfg.redundancy_period) == 0)
         moving: set[int] = set()
         plan = self.plan = self.planner(

@@ -5,12 +5,10 @@ live robots' twins track them within a stated bound.
 Bound (see bench/hwbridge.py for the measured numbers): with feed-forward on, as in
 configs/mixed.toml, twin position error mean < 5 cm and p95 < 15 cm per live robot.
 
-Skipped until the whole pipeline exists (swarmcover/run.py and a coordinator planner that
-no longer raises NotImplementedError). The run is real time: a few minutes of wall time.
+The run is real time: a few minutes of wall time.
 """
 from __future__ import annotations
 
-import inspect
 import json
 import re
 from pathlib import Path
@@ -22,23 +20,7 @@ from procs import free_port
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _pipeline_missing() -> str | None:
-    try:
-        import swarmcover.run  # noqa: F401
-        from coordinator import planner
-    except ImportError as e:
-        return f"pipeline not there yet: {e}"
-    try:
-        if "raise NotImplementedError" in inspect.getsource(planner.plan_cycle):
-            return "coordinator planner not implemented yet"
-    except (AttributeError, OSError, TypeError):
-        pass
-    return None
-
-
-pytestmark = [pytest.mark.timeout(420),
-              pytest.mark.skipif(_pipeline_missing() is not None,
-                                 reason=_pipeline_missing() or "")]
+pytestmark = pytest.mark.timeout(420)
 
 
 def test_mixed_run_covers_with_live_stand_ins(procs, tmp_path):
