@@ -121,7 +121,7 @@ def test_router_world_and_agents_on_three_hosts(procs, lab, tmp_path, secure):
     add_zenoh_args(p)
     s = open_session(p.parse_args(["--connect", ep[2], "--swarm", swarm, *sec]))
     keys = Keys(swarm)
-    agents = {}
+    agents, started = {}, {}
     try:
         mb, rx = Mailbox(), Receiver()
         sub = s.declare_subscriber(keys.spawn, mb.callback)
@@ -134,6 +134,7 @@ def test_router_world_and_agents_on_three_hosts(procs, lab, tmp_path, secure):
             for key, payload, _ in ([item] if item else []) + mb.drain():
                 sp = rx.decode(key, payload, Spawn)
                 if sp is not None and sp.robot not in agents:
+                    started[sp.robot] = time.monotonic()
                     agents[sp.robot] = procs.start(_in(
                         lab.a, "agent", "--id", str(sp.robot), "--kind", sp.kind,
                         "--run-config", CONFIG, *za))
@@ -142,15 +143,21 @@ def test_router_world_and_agents_on_three_hosts(procs, lab, tmp_path, secure):
         s.close()
     assert agents, "the coordinator in ns W never asked for a robot"
     done = [ln for ln in coord.output().splitlines() if ln.startswith("DONE certified=")]
+    t_stop = time.monotonic()
     for a in agents.values():
         a.signal(2)
-    ticks = []
+    ticks = {}
     for rid, a in agents.items():
         a.wait(20)
         m = re.search(r"stopped: (\d+) ticks", a.output())
-        ticks.append(int(m.group(1)) if m else 0)
-    # the world in ns W drove the agents in ns A through the router in ns R
-    assert all(t > 0 for t in ticks), (ticks, {r: a.output()[-800:] for r, a in agents.items()})
+        ticks[rid] = int(m.group(1)) if m else 0
+    # the world in ns W drove the agents in ns A through the router in ns R (an agent
+    # started in the last seconds before the bound may not have had a tick yet)
+    settled = [rid for rid in agents if t_stop - started[rid] > 5.0]
+    assert settled, "no agent ran for 5 s"
+    assert all(ticks[rid] > 0 for rid in settled), (
+        ticks, {r: agents[r].output()[-800:] for r in settled if ticks[r] == 0})
+    ticks = sorted(ticks.values(), reverse=True)
     _VERDICT["certified"] = bool(done) and done[-1] == "DONE certified=True"
     if not _VERDICT["certified"]:
         pytest.skip(f"the coverage run did not certify within {bound:.0f} s "
