@@ -394,3 +394,25 @@ def test_generated_router_config_works_as_a_drop_in_router(procs, profile, tmp_p
     finally:
         for s in (world, viewer, a2):
             s.close()
+
+
+def test_secure_command_line(tmp_path):
+    import subprocess
+    from procs import ROOT, SWARMCOVER
+
+    def sc(*a):
+        return subprocess.run(SWARMCOVER + ["secure", *map(str, a)], capture_output=True,
+                              text=True, timeout=60, cwd=ROOT)
+    r = sc("init", tmp_path / "p", "--agents", 3, "--host", "10.200.7.1", "--days", 30)
+    assert r.returncode == 0 and "8 identities" in r.stdout, r.stderr
+    r = sc("init", tmp_path / "p", "--agents", 3)
+    assert r.returncode == 2 and "not empty" in r.stderr
+    r = sc("show", tmp_path / "p")
+    assert "agent-0      may publish: sc/*/robot/0/cmd_vel" in r.stdout, r.stdout
+    assert "viewer       may publish: (nothing)" in r.stdout
+    r = sc("export", tmp_path / "p", tmp_path / "r2", "agent-2")
+    assert r.returncode == 0 and (tmp_path / "r2/ids/agent-2/key.pem").is_file()
+    r = sc("export", tmp_path / "p", tmp_path / "r3", "agent-3")
+    assert r.returncode == 2 and "agent-3" in r.stderr
+    r = sc("router-config", tmp_path / "p", "--listen", "udp/0.0.0.0:7447")
+    assert r.returncode == 2 and "udp/" in r.stderr
