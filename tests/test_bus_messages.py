@@ -195,3 +195,16 @@ def test_readme_topic_table_matches_code():
 def test_angles_accept_pi_boundary():
     s = Sense(robot=0, ids=[1], bearings=[-math.pi], back_bearings=[math.pi])
     assert decode(s.encode()).bearings == [-math.pi]
+
+
+def test_zenoh_cli_decoder_entry_point():
+    """`zenoh subscribe ... --decoder swarmcover` finds our decoder through the entry point."""
+    import json
+    from importlib.metadata import entry_points
+    eps = [e for e in entry_points(group="zenoh_cli.codecs.decoders") if e.name == "swarmcover"]
+    assert eps, "entry point zenoh_cli.codecs.decoders:swarmcover is not installed"
+    decode_fn = eps[0].load()
+    line = json.loads(decode_fn("sc/x/robot/1/sense", good_sense().encode()))
+    assert line["_t"] == "Sense" and line["key"] == "sc/x/robot/1/sense" and line["ids"] == [2, 5]
+    bad = json.loads(decode_fn("sc/x/robot/1/sense", b"\x00"))
+    assert "_error" in bad and "Sense" not in bad.get("_t", "")

@@ -187,7 +187,10 @@ def test_a_silent_agent_delays_ticks_but_never_stalls(procs, router, zargs, tmp_
         assert w.wait(timeout=40) == 0
         assert time.monotonic() - t0 >= 4 * 0.3
         summary = json.loads(out.read_text())["summary"]
-        assert summary["ticks"] == 4 and summary["late"] == 4
+        # every tick waited the timeout for the silent agent and then went on (the first
+        # one only if the token was already in the world's start-up snapshot: under load
+        # it can arrive a tick late)
+        assert summary["ticks"] == 4 and summary["late"] >= 3
     finally:
         token.undeclare()
         s.close()
