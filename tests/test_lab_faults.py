@@ -181,8 +181,8 @@ def test_a_router_restarted_mid_run_the_processes_reconnect(tmp_path):
 
 def test_a_run_over_lossy_delayed_links_still_certifies(tmp_path):
     if _VERDICT.get("certified") is False:
-        pytest.skip("the router-restart run of this module did not certify either: the "
-                    "coordinator is still being tuned")
+        pytest.skip("an earlier full run of this module did not certify within the bound: "
+                    "the coordinator is still being tuned")
     r = lossy_run(tmp_path, loss=0.02, delay_s=0.005, jitter_s=0.002, wall_timeout=RUN_BOUND_S)
     assert r["link"]["lost"] > 0 and r["link"]["connections"] >= 4
     assert r.get("sim_time_s", 0) > 0, "the world made no progress over the lossy links"
@@ -199,8 +199,8 @@ def test_a_run_with_real_packet_loss_between_namespaces_still_certifies(tmp_path
         pytest.skip("needs root, iproute2 and iptables (Debian packages) for namespaces "
                     "with packet loss")
     if _VERDICT.get("certified") is False:
-        pytest.skip("the router-restart run of this module did not certify either: the "
-                    "coordinator is still being tuned")
+        pytest.skip("an earlier full run of this module did not certify within the bound: "
+                    "the coordinator is still being tuned")
     try:
         r = netns_loss_run(tmp_path, 0.05, wall_timeout=RUN_BOUND_S)
     except OSError as e:
