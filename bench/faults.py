@@ -406,7 +406,8 @@ def first_cycle(out: Path, timeout: float = 60.0) -> dict | None:
     return None
 
 
-def restart_run(work: Path, down_s: float = 1.0, wall_timeout: float = 120.0) -> dict:
+def restart_run(work: Path, down_s: float = 1.0, wall_timeout: float = 120.0,
+                config: str = "configs/small.toml") -> dict:
     """A small run whose router is killed (SIGKILL) at the first cycle and restarted on the
     same port ``down_s`` later."""
     work.mkdir(parents=True, exist_ok=True)
@@ -423,21 +424,24 @@ def restart_run(work: Path, down_s: float = 1.0, wall_timeout: float = 120.0) ->
         info["outage_s"] = time.monotonic() - t
 
     try:
-        res = small_run(work / "run", router.endpoint, wall_timeout=wall_timeout, on_start=fault)
+        res = small_run(work / "run", router.endpoint, config=config, wall_timeout=wall_timeout,
+                        on_start=fault)
     finally:
         router.kill(signal.SIGTERM)
     return dict(res, **info)
 
 
 def lossy_run(work: Path, loss: float, delay_s: float, jitter_s: float = 0.0,
-              wall_timeout: float = 120.0, seed: int = 0, rto_s: float = 0.2) -> dict:
+              wall_timeout: float = 120.0, seed: int = 0, rto_s: float = 0.2,
+              config: str = "configs/small.toml") -> dict:
     """A small run with every process's link to the router through one FaultProxy."""
     work.mkdir(parents=True, exist_ok=True)
     router = Router(free_port(), log=work / "router.log").start()
     try:
         with FaultProxy(("127.0.0.1", router.port), loss=loss, delay_s=delay_s,
                         jitter_s=jitter_s, rto_s=rto_s, seed=seed) as fp:
-            res = small_run(work / "run", f"tcp/127.0.0.1:{fp.port}", wall_timeout=wall_timeout)
+            res = small_run(work / "run", f"tcp/127.0.0.1:{fp.port}", config=config,
+                            wall_timeout=wall_timeout)
             res["link"] = dict(fp.stats, loss=loss, delay_s=delay_s, jitter_s=jitter_s,
                                rto_s=rto_s)
     finally:
@@ -502,7 +506,8 @@ class NetnsPair:
         self.made = []
 
 
-def netns_loss_run(work: Path, loss: float, wall_timeout: float = 120.0) -> dict:
+def netns_loss_run(work: Path, loss: float, wall_timeout: float = 120.0,
+                   config: str = "configs/small.toml") -> dict:
     """A small run whose processes reach the router over a veth with real packet loss."""
     work.mkdir(parents=True, exist_ok=True)
     net = NetnsPair().up()
@@ -511,7 +516,7 @@ def netns_loss_run(work: Path, loss: float, wall_timeout: float = 120.0) -> dict
         router = Router(7447, log=work / "router.log", host=net.router_ip,
                         prefix=net.exec(net.r)).start()
         try:
-            res = small_run(work / "run", router.endpoint, wall_timeout=wall_timeout,
+            res = small_run(work / "run", router.endpoint, config=config, wall_timeout=wall_timeout,
                             prefix=net.exec(net.c))
         finally:
             router.kill(signal.SIGTERM)

@@ -41,6 +41,8 @@ class CoordinatorConfig:
     spawn_timeout_s: float = 60.0  # new agent must report within this (sim s)
     settle_s: float = 0.6          # wait after a cycle's last task before re-planning (sim s)
     dead_after_cycles: int = 3     # heartbeat: robot with no status for this many cycles is dead
+    dead_grace_s: float = 3.0      # a robot whose liveliness token stays gone this long (sim s)
+                                   # is dead; shorter gaps (router restart) are forgiven
     max_cycles: int = 100000
     final_recheck: bool = True     # after K is empty: redistribute redundant robots, re-certify
 

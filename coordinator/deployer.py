@@ -41,6 +41,7 @@ class Robot:
     status_cycle: int = -1       # cycle in which the last status arrived
     spawned_t: float = 0.0
     dead: bool = False
+    gone_since: float | None = None  # sim time its liveliness token vanished
 
 
 @dataclass
@@ -136,6 +137,7 @@ class Deployer:
         r.status = st
         r.status_cycle = self.cycle
         r.alive = True
+        r.gone_since = None
         if self.phase == "init" and st.vertex >= 0:
             # restart: adopt the agent's own idea of its vertex
             self.vertex_of.setdefault(st.robot, st.vertex)
@@ -157,10 +159,16 @@ class Deployer:
                 self.next_robot = max(self.next_robot, rid + 1)
             if not r.dead:
                 r.alive = True
+                r.gone_since = None
             return
         if r is None or r.dead:
             return
-        self._robot_died(r, now, "liveliness token gone")
+        # not dead yet: a router restart or a network hiccup removes every token at once.
+        # Death needs the token to stay gone for dead_grace_s of *simulated* time, and the
+        # world's clock does not reach us while the router is down.
+        r.alive = False
+        if r.gone_since is None:
+            r.gone_since = now
 
     def reopen_if_needed(self, now: float) -> bool:
         """After certification, a robot failure re-opens the cycles (its hole is refilled)."""
@@ -333,6 +341,15 @@ class Deployer:
         if self._pending_failures and plan.certified:
             self.failures_healed += self._pending_failures
             self._pending_failures = 0
+        if not snap.occupant:
+            # nobody to certify with (everyone was lost): a certificate would be vacuous
+            if self._robots_in_use() < self.cfg.robots_max and not self.pending_holds:
+                for k in range(len(self.sources)):
+                    rid = self._spawn(k, now)
+                    self.vertex_of[rid] = k
+                    self.pending_holds[rid] = k
+            self._set_phase("execute", now)
+            return
         if not plan.frontier and not plan.open_vertices:
             if plan.certified:
                 self._finish(plan, now)
@@ -786,7 +803,12 @@ class Deployer:
                         s.state, s.reason = "failed", "robot died"
 
     def _heartbeat(self, now: float) -> None:
-        """Spec 6 [P]: a robot with no status for dead_after_cycles cycles is dead."""
+        """Spec 6 [P]: a robot whose token has been gone for dead_grace_s (sim), or with no
+        status for dead_after_cycles cycles, is dead."""
+        for r in list(self.robots.values()):
+            if (not r.dead and r.gone_since is not None
+                    and now - r.gone_since >= self.cfg.dead_grace_s):
+                self._robot_died(r, now, "liveliness token gone")
         if self.phase not in ("settle",):
             return
         for r in list(self.robots.values()):

@@ -25,9 +25,9 @@ import pytest
 
 from procs import ROOT
 
-RUN_BOUND_S = 30.0
+RUN_BOUND_S = 120.0
 PY = sys.executable
-CONFIG = "configs/small.toml"
+CONFIG = "configs/tiny.toml"
 
 
 def _ip(*args, ns: str | None = None) -> None:
