@@ -31,6 +31,7 @@ from bus.session import (Mailbox, Receiver, Shutdown, add_zenoh_args, keys_from_
                          open_session, publisher, setup_logging)
 
 from .frames import Transform2D, world_to_mocap, wrap
+from .room import Room
 from .ros2 import CdrError, cmd_vel_key, decode_twist
 
 log = logging.getLogger("swarmcover.fake_robot")
@@ -50,16 +51,21 @@ class DiffDriveSim:
     """Unicycle body with latency, multiplicative actuation noise and slip (pure, time in).
 
     Noise and slip are drawn once per applied command (so they do not average out within
-    a command), as uneven wheels and floors do.
+    a command), as uneven wheels and floors do. With a :class:`~hwbridge.room.Room` the
+    disk body stops at (and slides along) the room's walls, as a physical robot does;
+    motion is then integrated in steps of at most a quarter of the body radius.
     """
 
-    def __init__(self, pose: tuple[float, float, float], params: DriveParams, seed: int = 0):
+    def __init__(self, pose: tuple[float, float, float], params: DriveParams, seed: int = 0,
+                 room: Room | None = None):
         self.x, self.y, self.theta = pose
         self.p = params
         self.rng = random.Random(seed)
+        self.room = room if room is not None and len(room) else None
         self.pending: deque = deque()
         self.v = self.w = self.vlat = 0.0        # actual velocities being executed
         self.cmd = (0.0, 0.0)                    # last applied command
+        self.wall_time = 0.0                     # s spent pressed against a wall
 
     def command(self, now: float, v: float, w: float) -> None:
         self.pending.append((now + self.p.latency_s, float(v), float(w)))
@@ -75,6 +81,17 @@ class DiffDriveSim:
         while self.pending and self.pending[0][0] <= now:
             _, v, w = self.pending.popleft()
             self._apply(v, w)
+        if dt <= 0:
+            return self.x, self.y, self.theta
+        n = 1
+        if self.room is not None:
+            n = max(1, math.ceil((abs(self.v) + abs(self.vlat)) * dt / (0.25 * self.room.radius)))
+        for _ in range(n):
+            self._move(dt / n)
+        return self.x, self.y, self.theta
+
+    def _move(self, dt: float) -> None:
+        prev = (self.x, self.y)
         if abs(self.w) > 1e-9:   # exact arc
             r = self.v / self.w
             th1 = self.theta + self.w * dt
@@ -87,7 +104,10 @@ class DiffDriveSim:
         self.x -= self.vlat * math.sin(self.theta) * dt
         self.y += self.vlat * math.cos(self.theta) * dt
         self.theta = wrap(self.theta)
-        return self.x, self.y, self.theta
+        if self.room is not None:
+            self.x, self.y, hit = self.room.collide(self.x, self.y, prev)
+            if hit:
+                self.wall_time += dt
 
 
 def _triple(text: str) -> tuple[float, float, float]:
@@ -125,6 +145,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--transform", type=lambda s: Transform2D(*(float(v) for v in s.split(","))),
                    metavar="YAW,TX,TY,SCALE", help="mocap floor -> world transform")
     p.add_argument("--seed", type=int)
+    p.add_argument("--walls", choices=("map", "none"), default="map",
+                   help="map (default): the body stops at the walls of the run's map (from "
+                        "CONFIG, else the world's world/info), as a physical robot in that room "
+                        "does; none: an open floor")
     p.add_argument("--duration", type=float, default=0.0, help="exit after S seconds")
     p.add_argument("--log-level", default="INFO")
     return p
@@ -166,6 +190,35 @@ def resolve(args) -> dict:
     return out
 
 
+def make_room(walls: str, run_config: str | None, session, keys) -> Room | None:
+    """The walls the stand-in body stops at: the run config's map (boundary, obstacles and
+    [robots].radius, built as the world builds it), else the world's WorldInfo; None for
+    ``walls == "none"`` or when neither is available (logged)."""
+    if walls == "none":
+        return None
+    if run_config:
+        try:
+            from world.maps import map_from_path
+            cfg, wm = map_from_path(run_config)
+            room = Room.from_polygons(wm.boundary, wm.obstacles, cfg.robots.radius)
+            log.info("walls: %d segments of the map in %s, body radius %.3f m",
+                     len(room), run_config, room.radius)
+            return room
+        except Exception as e:           # world's ConfigError/ValueError/OSError
+            log.warning("walls: cannot build the map of %s (%s); asking the world", run_config, e)
+    from .node import query_world_info
+    info = query_world_info(session, keys, 5.0)
+    if info is None or len(info.boundary) < 6:
+        log.warning("walls: no map (no config map and no world/info answer): open floor, "
+                    "the body can leave the map")
+        return None
+    pts = [(info.boundary[k], info.boundary[k + 1]) for k in range(0, len(info.boundary) - 1, 2)]
+    obs = [[(o[k], o[k + 1]) for k in range(0, len(o) - 1, 2)] for o in info.obstacles]
+    room = Room.from_polygons(pts, obs, info.robot_radius or 0.06)
+    log.info("walls: %d segments from world/info, body radius %.3f m", len(room), room.radius)
+    return room
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     args.run_config = args.run_config or args.run_config_opt
@@ -194,7 +247,8 @@ def main(argv: list[str] | None = None) -> int:
                 if info is not None and len(info.sources) >= 3 * (src + 1):
                     start = tuple(info.sources[3 * src:3 * src + 3])
             start = tuple(start) if start is not None else (0.0, 0.0, 0.0)
-            sim = DiffDriveSim(start, o["drive"], o["seed"])
+            room = make_room(args.walls, args.run_config, session, keys)
+            sim = DiffDriveSim(start, o["drive"], o["seed"], room)
             rng = random.Random(o["seed"] + 7919)
             mb = Mailbox()
             rec = Receiver(log)
@@ -246,10 +300,10 @@ def main(argv: list[str] | None = None) -> int:
                     mocap_pub.put(MocapPose(body=o["body"], t=time.monotonic(), x=pos[0], y=pos[1],
                                             z=pos[2], qx=q[0], qy=q[1], qz=q[2], qw=q[3]).encode())
                 stop.wait(max(0.0, dt - (time.monotonic() - now)))
-            log.info("robot %d: %d commands, final pose (%.3f, %.3f, %.3f)", args.id, n_cmd,
-                     sim.x, sim.y, sim.theta)
+            log.info("robot %d: %d commands, final pose (%.3f, %.3f, %.3f), %.1f s against a wall",
+                     args.id, n_cmd, sim.x, sim.y, sim.theta, sim.wall_time)
             print(f"FINAL fake-robot {args.id} x={sim.x:.4f} y={sim.y:.4f} theta={sim.theta:.4f} "
-                  f"commands={n_cmd}", flush=True)
+                  f"commands={n_cmd} wall_s={sim.wall_time:.1f}", flush=True)
         finally:
             for s in subs:
                 s.undeclare()

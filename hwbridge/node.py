@@ -38,7 +38,7 @@ from .frames import mocap_to_world
 from .metrics import TrackLog, formation_discrepancy, summary
 from .mocap import RateMonitor, make_source
 from .output import make_output, to_unicycle
-from .safety import Gates, Limits
+from .safety import Gates, Limits, edge_distance, point_in_polygon
 from .twin import TwinGains, VelocityEstimator, twin_command
 
 log = logging.getLogger("swarmcover.hwbridge")
@@ -189,7 +189,15 @@ class Bridge:
         if d is None:
             return
         if d.reason != self.last_reason.get(rid):
-            if d.stopped:
+            g = self.gates.gates[rid]
+            if d.reason == "geofence" and g.pose is not None:
+                fence = g.limits.geofence or ()
+                log.warning("robot %d: stopping (geofence): its mocap centre (%.3f, %.3f) "
+                            "(world frame) is %s the fence, %.3f m from its edge (margin "
+                            "%.3f m); it stays stopped until it is back inside", rid, *g.pose,
+                            "inside" if point_in_polygon(*g.pose, fence) else "OUTSIDE",
+                            edge_distance(*g.pose, fence), g.limits.margin)
+            elif d.stopped:
                 log.info("robot %d: stopping (%s)", rid, d.reason.replace("_", " "))
             elif self.last_reason.get(rid) not in (None, "ok", "clamped"):
                 log.info("robot %d: commands flowing again", rid)
@@ -373,6 +381,7 @@ def main(argv: list[str] | None = None) -> int:
                 fence = flat_to_polygon(info.boundary)
             else:
                 fence = cfg.fence_polygon()
+            _check_fence_margin(cfg)
             try:
                 bridge = Bridge(cfg, session, keys, fence, spawn=args.spawn)
             except (ValueError, ImportError, ConnectionError) as e:
@@ -396,6 +405,19 @@ def main(argv: list[str] | None = None) -> int:
                         f.write(text + "\n")
             session.close()
     return 0
+
+
+def _check_fence_margin(cfg: hwconfig.BridgeConfig) -> None:
+    """Warn when the geofence would stop robots that only touch a wall: the fence tests the
+    body's centre, which stays one body radius inside a wall the robot touches."""
+    if cfg.geofence != "map" or cfg.geofence_margin <= 0:
+        return
+    robots = cfg.raw.get("robots") if isinstance(cfg.raw.get("robots"), dict) else {}
+    radius = robots.get("radius", 0.06)
+    if isinstance(radius, (int, float)) and cfg.geofence_margin >= radius:
+        log.warning("%s: [hwbridge] geofence_margin = %g m >= the body radius %g m: a robot "
+                    "touching a wall (its centre %g m from it) is stopped there, and agents "
+                    "touch walls to find them", cfg.path, cfg.geofence_margin, radius, radius)
 
 
 def _source_invalid(source) -> int:

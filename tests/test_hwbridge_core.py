@@ -106,7 +106,9 @@ def test_twin_p_control_is_proportional_and_teleports():
 @given(ex=st.floats(-0.14, 0.14), ey=st.floats(-0.14, 0.14), eth=angle,
        kp=st.floats(0.5, 8), dt=st.floats(0.005, 0.05))
 def test_twin_error_contracts_toward_a_still_target(ex, ey, eth, kp, dt):
-    g = TwinGains(kp=kp, k_theta=kp, teleport_dist=0.2)
+    # w_cap above k_theta * pi: the exponential bound holds for the unsaturated loop (with
+    # the default 10 rad/s cap, kp = 8 and a heading error near pi saturate it)
+    g = TwinGains(kp=kp, k_theta=kp, teleport_dist=0.2, w_cap=30.0)
     target = (1.0, 1.0, 0.5)
     twin = (1.0 - ex, 1.0 - ey, wrap(0.5 - eth))
     e0 = math.hypot(ex, ey)
@@ -577,3 +579,93 @@ def test_metrics_lag_formation_summary():
     rep = log.report()["1"]
     assert rep["position_error_m"]["mean"] == pytest.approx(0.01)
     assert rep["position_error_m"]["n"] == 30           # 2 s at 20 Hz, minus 0.5 s settle
+
+
+# ---------------------------------------------------------------------- stand-in room
+ROOM_BOX = [(0, 0), (2.5, 0), (2.5, 2.0), (0, 2.0)]
+
+
+def _drive(sim, v, w, seconds, dt=0.005, t0=0.0):
+    sim.command(t0, v, w)
+    t = t0
+    while t < t0 + seconds:
+        t += dt
+        sim.step(t, dt)
+    return t
+
+
+def test_room_pushes_the_body_out_of_walls_and_corners():
+    from hwbridge.room import Room
+    room = Room.from_polygons(ROOM_BOX, [[(1, 1), (1.5, 1), (1.5, 1.5), (1, 1.5)]], radius=0.06)
+    assert len(room) == 8
+    assert room.collide(1.0, 0.5) == (1.0, 0.5, False)            # free: untouched
+    x, y, hit = room.collide(-0.01, 0.5, prev=(0.07, 0.5))         # through the left wall
+    assert hit and (x, y) == pytest.approx((0.06, 0.5))
+    x, y, hit = room.collide(0.0, 0.5, prev=(0.07, 0.5))           # exactly on it
+    assert hit and (x, y) == pytest.approx((0.06, 0.5))
+    x, y, hit = room.collide(0.02, 0.03)                           # into the corner
+    assert hit and x >= 0.06 - 1e-9 and y >= 0.06 - 1e-9
+    x, y, hit = room.collide(1.25, 0.97)                           # against the obstacle
+    assert hit and (x, y) == pytest.approx((1.25, 0.94))
+    assert room.collide(5.0, 1.0) == (5.0, 1.0, False)             # outside stays outside
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(-math.pi, math.pi), st.floats(0.1, 0.6), st.floats(-1.0, 1.0),
+       st.floats(0.01, 0.2))
+def test_walled_stand_in_never_leaves_the_map(theta, v, w, dt):
+    """A stand-in driven at (and through) the walls for seconds stays inside, its centre at
+    least the body radius from every wall -- so a geofence at the map boundary never trips
+    for a robot that only touches walls, whatever the control period (dt up to 0.2 s)."""
+    from hwbridge.fake_robot import DiffDriveSim, DriveParams
+    from hwbridge.room import Room
+    room = Room.from_polygons(ROOM_BOX, radius=0.06)
+    sim = DiffDriveSim((0.3, 1.0, theta), DriveParams(latency_s=0.0), seed=1, room=room)
+    _drive(sim, v, w, 8.0, dt=dt)
+    assert point_in_polygon(sim.x, sim.y, ROOM_BOX)
+    assert edge_distance(sim.x, sim.y, ROOM_BOX) >= 0.06 - 1e-6
+    assert inside_fence(sim.x, sim.y, tuple(ROOM_BOX), 0.0)
+
+
+def test_stand_in_slides_along_a_wall_and_backs_off_it():
+    from hwbridge.fake_robot import DiffDriveSim, DriveParams
+    from hwbridge.room import Room
+    room = Room.from_polygons(ROOM_BOX, radius=0.06)
+    p = DriveParams(latency_s=0.0, v_noise=0.0, w_noise=0.0, slip=0.0)
+    sim = DiffDriveSim((0.3, 0.4, math.pi - 0.3), p, room=room)     # toward the left wall
+    t = _drive(sim, 0.3, 0.0, 3.0)
+    assert sim.x == pytest.approx(0.06, abs=1e-6)                   # pressed against it
+    assert 0.4 < sim.y < 2.0 - 0.06                                  # slid up along it
+    assert sim.wall_time > 1.0
+    _drive(sim, -0.3, 0.0, 0.5, t0=t)                                # reverse: comes off
+    assert sim.x > 0.15
+    free = DiffDriveSim((0.3, 0.4, math.pi - 0.3), p)               # no room: leaves the map
+    _drive(free, 0.3, 0.0, 3.0)
+    assert not point_in_polygon(free.x, free.y, ROOM_BOX)
+
+
+def test_geofence_passes_a_robot_touching_the_wall_and_stops_one_beyond_it():
+    box = tuple(ROOM_BOX)
+    g = SafetyGate(1, Limits(geofence=box, margin=0.0))
+    g.on_command(0.0, 0.2, 0.0)
+    g.on_pose(0.0, 0.06, 0.06)               # body radius 0.06 against two walls: a corner
+    assert g.decide(0.01).reason == "ok"
+    g.on_pose(0.02, -0.005, 0.4)             # centre beyond the wall: left the map
+    assert g.decide(0.03).reason == "geofence"
+
+
+def test_stand_in_room_comes_from_the_run_config_map(tmp_path):
+    from hwbridge.fake_robot import make_room
+    cfg = tmp_path / "room.toml"
+    cfg.write_text('name = "room"\nrv = 1.0\n[map]\nboundary = [[0, 0], [2.5, 0], [2.5, 2], [0, 2]]\n'
+                   'obstacles = [{type = "rect", min = [1, 1], max = [1.5, 1.5]}]\n'
+                   'sources = [{x = 0.3, y = 1.0}]\n[robots]\nradius = 0.08\n')
+    room = make_room("map", str(cfg), None, None)
+    assert len(room) == 8 and room.radius == 0.08
+    assert make_room("none", str(cfg), None, None) is None
+    assert ROOT_CONFIG.is_file()
+    mixed = make_room("map", str(ROOT_CONFIG), None, None)
+    assert len(mixed) == 4 and mixed.radius == 0.06
+
+
+ROOT_CONFIG = __import__("pathlib").Path(__file__).resolve().parent.parent / "configs" / "mixed.toml"
