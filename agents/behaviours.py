@@ -109,6 +109,7 @@ class Behaviour:
         self.single: int | None = None
         self.refs: list[int] = []
         self.ref_bearing: dict[int, float] = {}
+        self.ref_heading: dict[int, float] = {}
         self.step_left = 0.0
         self.step_mark = 0.0
         self.settle_left = 0
@@ -647,6 +648,7 @@ class Behaviour:
             self._finish("done", "scale skipped: no reference in view")
             return
         self.ref_bearing = {l: self.seen[l] for l in self.refs}
+        self.ref_heading = {l: self.heading for l in self.refs}
         self.mode = "scale_out"
         self.mark = self.advance
         self.blocked_since = None
@@ -656,6 +658,7 @@ class Behaviour:
         for l in self.refs:
             if l in self.seen:
                 self.ref_bearing[l] = self.seen[l]
+                self.ref_heading[l] = self.heading
         out = self.advance - self.mark
         lost = [l for l in self.refs if self.n - self.last_seen.get(l, -10**9) >= p.link_lost_ticks]
         if lost:
@@ -670,7 +673,7 @@ class Behaviour:
         if out >= p.scale_max_rv * p.rv:
             self._finish("done", "scale: no link lost")
             return 0.0, 0.0
-        known = list(self.ref_bearing.values())
+        known = self._ref_now()
         d = away_direction(known)
         if d is None or resultant(known) < 0.2:
             self._finish("done", "scale skipped: references surround the robot")
@@ -684,6 +687,12 @@ class Behaviour:
         self.progress = min(0.5, 0.5 * out / (p.scale_max_rv * p.rv))
         return ux, uy
 
+    def _ref_now(self) -> list[float]:
+        """Reference bearings in the current body frame: a landmark out of view keeps its
+        last bearing, turned by the (dead-reckoned) rotation since it was seen."""
+        return [wrap(b - (self.heading - self.ref_heading.get(l, self.heading)))
+                for l, b in self.ref_bearing.items()]
+
     def _start_back_step(self) -> None:
         self.step_left = self.p.scale_step_rv * self.p.rv
         self.step_mark = self.advance
@@ -693,12 +702,13 @@ class Behaviour:
         for l in self.refs:
             if l in self.seen:
                 self.ref_bearing[l] = self.seen[l]
+                self.ref_heading[l] = self.heading
         self.back_dist = self.advance - self.mark
         self.progress = 0.5 + 0.5 * min(1.0, self.back_dist / max(self.out_dist, 1e-9))
         if self.step_left > 0:
             left = self.step_left - (self.advance - self.step_mark)
             if left > 1e-6:
-                d = circmean(self.ref_bearing.values())
+                d = circmean(self._ref_now())
                 if d is None:
                     self._finish("failed", "lost landmarks")
                     return 0.0, 0.0

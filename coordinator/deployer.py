@@ -716,8 +716,52 @@ class Deployer:
         if len(lm) < 2:
             return None
         return Task(kind="deploy", vertex=spec.new_vertex, landmarks=lm, bearings=br,
+                    ref_offsets=self._chained_offsets(f, lm),
                     scale_correct=spec.scale_correct or len(lm) == 2,
                     timeout_s=self.cfg.task_timeout_s)
+
+    def _mutual(self, a: int, b: int):
+        """heading(a) - heading(b) from the robots' current Status (mutual bearings), or None."""
+        ra, rb = self.robots.get(a), self.robots.get(b)
+        if ra is None or rb is None or ra.status is None or rb.status is None:
+            return None
+        sa = dict(zip(ra.status.nbr_ids, ra.status.nbr_bearings))
+        sb = dict(zip(rb.status.nbr_ids, rb.status.nbr_bearings))
+        if b not in sa or a not in sb:
+            return None
+        return wrap(sb[a] - sa[b] + math.pi)
+
+    def _chained_offsets(self, f: int, lm: list[int]) -> list[float]:
+        """ref_offsets for bearings recorded by f's occupant in the snapshot (spec 4.7).
+        Landmarks that held a neighbour vertex of f then: from the snapshot's mutual
+        bearings; a robot that moved there since (the one now holding f, or the robot
+        ahead on a push): chained through a static landmark and the robots' current Status.
+        [] when every robot is holonomic, or when some landmark cannot be aligned."""
+        snap = self.snapshot
+        if all(k == "holonomic" for k in snap.kinds.values()):
+            return []
+        static = {}
+        for r in lm:
+            u = self._snap_vertex(r)
+            if u >= 0 and u != f:
+                o = self._ref_offsets(f, [u])
+                if o:
+                    static[r] = o[0]
+        out = []
+        for r in lm:
+            if r in static:
+                out.append(static[r])
+                continue
+            got = None
+            for s, o in static.items():
+                m = self._mutual(s, r)
+                if m is not None:
+                    got = wrap(o + m)
+                    break
+            if got is None:
+                return []
+            out.append(got)
+        return out
 
     def _vertex_landmarks(self, v: int, exclude: set[int]) -> tuple[list[int], list[float]]:
         """Occupants of v's neighbour vertices (minus ``exclude``) and v's recorded bearings."""
@@ -753,7 +797,7 @@ class Deployer:
                 br.append(b)
         if not lm:
             return None
-        refs = self._ref_offsets(target, [self._snap_vertex(r) for r in lm])
+        refs = self._chained_offsets(target, lm)
         task = Task(kind="goto", vertex=target, landmarks=lm, bearings=br, ref_offsets=refs,
                     timeout_s=self.cfg.task_timeout_s)
         # direction hint: the target vertex as seen from the mover's vertex; the agent

@@ -261,8 +261,6 @@ def main(argv: list[str] | None = None) -> int:
     logdir.mkdir(parents=True, exist_ok=True)
     (out / "resolved.toml").write_text(resolved)
     conf_path = str((out / "resolved.toml").resolve())
-    global _RUN_CONFIG
-    _RUN_CONFIG = conf_path
 
     if args.router:
         endpoint = args.router
@@ -312,16 +310,26 @@ def _open(endpoint: str, swarm: str) -> zenoh.Session:
     return open_session(p.parse_args(["--connect", endpoint, "--swarm", swarm]))
 
 
-_RUN_CONFIG = ""
-
-
-def _agent_args(spawn: Spawn) -> list[str]:
-    a = ["agent", "--id", str(spawn.robot), "--kind", spawn.kind]
-    if _RUN_CONFIG:
-        a += ["--run-config", _RUN_CONFIG]
+def _agent_args(spawn: Spawn, conf_path: str, live_limits: dict) -> list[str]:
+    """A live robot's agent plans with the robot's own limits ([[hwbridge.robots]]), so the
+    bridge's clamp does not rescale its turns behind its back."""
+    a = ["agent", "--id", str(spawn.robot), "--kind", spawn.kind, "--run-config", conf_path]
     if spawn.live:
         a.append("--live")
+        v_max, w_max = live_limits.get(spawn.robot, (None, None))
+        if v_max is not None:
+            a += ["--v-max", str(v_max)]
+        if w_max is not None:
+            a += ["--param", f"w_max={float(w_max)}"]
     return a
+
+
+def _live_limits(cfg) -> dict:
+    out = {}
+    for r in cfg.section("hwbridge").get("robots", []) or []:
+        if isinstance(r, dict) and isinstance(r.get("id"), int):
+            out[r["id"]] = (r.get("v_max"), r.get("w_max"))
+    return out
 
 
 def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Keys, out: Path,
@@ -335,6 +343,7 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
     recorder = None
     last_cx: Complex | None = None
     last_truth: Truth | None = None
+    live_limits = _live_limits(cfg)
     cycles_f = open(out / "cycles.jsonl", "w")
     spawned = 0
     progress = Progress(label=cfg.name, enabled=not args.quiet, every_s=10.0)
@@ -362,7 +371,7 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                 if rel == "world/spawn":
                     sp = rx.decode(key, payload, Spawn)
                     if sp is not None and f"agent-{sp.robot}" not in launcher.children:
-                        launcher.start(f"agent-{sp.robot}", _agent_args(sp))
+                        launcher.start(f"agent-{sp.robot}", _agent_args(sp, conf_path, live_limits))
                         spawned += 1
                 elif rel == "world/truth":
                     last_truth = rx.decode(key, payload, Truth) or last_truth
