@@ -407,8 +407,8 @@ class Deployer:
             # spec 5.4: final redundancy pass; redundant robots go idle, then re-certify
             self.final_pass = True
             for v in sorted(plan.redundant):
-                rid = snap_occ = self.snapshot.occupant.get(v)
-                if snap_occ is None:
+                rid = self.snapshot.occupant.get(v)
+                if rid is None:
                     continue
                 self.left.add(rid)
                 self._send(rid, Task(kind="leave", vertex=-1,
