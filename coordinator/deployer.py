@@ -19,16 +19,13 @@ from typing import Callable
 
 from bus.messages import Complex, Remove, Spawn, Status, Task
 
+from .angles import wrap
 from .config import CoordinatorConfig
 from .planner import CyclePlan, JobSpec, Snapshot, plan_cycle
 
 log = logging.getLogger("swarmcover.coordinator")
 
 SETTLED_STATES = ("holding", "idle")
-
-
-def wrap(a: float) -> float:
-    return (a + math.pi) % (2 * math.pi) - math.pi
 
 
 @dataclass
@@ -97,7 +94,7 @@ class Deployer:
         self.robots: dict[int, Robot] = {}
         self.vertex_of: dict[int, int] = {}          # robot -> vertex
         self.contact: dict[int, float] = {}          # vertex -> sticky contact bearing
-        self.td_failures: dict[int, float] = {}      # vertex -> failed test-drive bearing
+        self.td_failures: dict[int, list[float]] = {}  # vertex -> failed test-drive bearings
         self.redundant: set[int] = set()             # vertices
         self.left: set[int] = set()                  # robots sent away (redundant, idle)
         self.next_robot = 0
@@ -109,6 +106,7 @@ class Deployer:
         self.jobs: list[PushJob] = []
         self.plan: CyclePlan | None = None
         self.snapshot: Snapshot | None = None
+        self._snap_vertex_of: dict[int, int] = {}     # robot -> vertex in the snapshot
         self.cycle_end_t = 0.0
         self.failures = 0
         self.failures_healed = 0
@@ -297,6 +295,11 @@ class Deployer:
                         sources=[k for k in range(len(self.sources)) if k in occupant],
                         source_dirs=self.sources)
 
+    def _take_snapshot(self) -> Snapshot:
+        snap = self.snapshot = self.build_snapshot()
+        self._snap_vertex_of = {r: v for v, r in snap.occupant.items()}
+        return snap
+
     def _strays(self, snap: Snapshot) -> set[int]:
         """Vertices in components of the (mutual-visibility) graph that hold no source: robots
         that lost the swarm (a failed move, a failure that cut the graph). No path can reach
@@ -315,7 +318,7 @@ class Deployer:
         return set(snap.occupant) - seen
 
     def _plan(self, now: float) -> None:
-        snap = self.snapshot = self.build_snapshot()
+        snap = self._take_snapshot()
         strays = self._strays(snap)
         if strays:
             for v in sorted(strays):
@@ -325,7 +328,7 @@ class Deployer:
                            now)
             log.warning("cycle %d: robots %s are cut off from every source: sent away",
                         self.cycle, sorted(snap.occupant[v] for v in strays))
-            snap = self.snapshot = self.build_snapshot()
+            snap = self._take_snapshot()
         run_redundancy = (self.cycle % max(1, self.cfg.redundancy_period) == 0)
         moving: set[int] = set()
         plan = self.plan = self.planner(
@@ -632,10 +635,11 @@ class Deployer:
         if td.reason.startswith("touch"):
             st = self.robots[td.robot].status
             bearing = st.contact_bearing if st is not None and st.contact else spec.direction
-            self.td_failures[spec.path[-1]] = bearing
+            # keep every failed direction: the fence blocks each one's 90 deg cone
+            self.td_failures.setdefault(spec.path[-1], []).append(bearing)
             self.contact[spec.path[-1]] = bearing
-            log.info("cycle %d: test drive from vertex %d touched an obstacle: %s -> O",
-                     self.cycle, spec.path[-1], spec.reclassify_on_touch)
+            log.info("cycle %d: test drive from vertex %d touched an obstacle: fence side "
+                     "of %s -> O", self.cycle, spec.path[-1], spec.frontier_edge)
         self._cancel(job, "test drive touched an obstacle")
 
     # ------------------------------------------------------------------ tasks
@@ -660,7 +664,7 @@ class Deployer:
         f = spec.path[-1]
         lm, br = self._vertex_landmarks(f, exclude=set())
         return Task(kind="test_drive", vertex=f, landmarks=lm, bearings=br,
-                    ref_offsets=self._ref_offsets(f, [self._snap_vertex(r) for r in lm]),
+                    ref_offsets=self._chained_offsets(f, lm),
                     direction=spec.direction, distance=self.params.d_td,
                     keep_after=self.cfg.wall_keep_rv * self.cfg.rv,
                     timeout_s=self.cfg.task_timeout_s)
@@ -671,10 +675,7 @@ class Deployer:
 
     def _snap_vertex(self, rid: int) -> int:
         """The vertex robot ``rid`` held in this cycle's snapshot (-1 if none)."""
-        for v, r in self.snapshot.occupant.items():
-            if r == rid:
-                return v
-        return -1
+        return self._snap_vertex_of.get(rid, -1)
 
     def _static(self, v: int) -> bool:
         """Vertex v's occupant stays put this cycle (not on any path, not a new position)."""
@@ -696,7 +697,7 @@ class Deployer:
                     direction=spec.direction, distance=max(0.0, dist),
                     timeout_s=self.cfg.task_timeout_s)
         if len(lm) >= 2:
-            task.ref_offsets = self._ref_offsets(f, [self._snap_vertex(r) for r in lm])
+            task.ref_offsets = self._chained_offsets(f, lm)
         return task
 
     def _task_refine(self, spec: JobSpec, job: PushJob, at_f: Step) -> Task | None:

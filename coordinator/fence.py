@@ -492,6 +492,12 @@ def detect_fence(
             else:
                 del deps[p]
 
+    # a robot with a frontier edge deploys off the edge (60 deg, triangles); the single-file
+    # direction is its fallback once those are gone (a corridor too narrow for triangles
+    # makes the edge deployments fail their test drives)
+    for p, lst in deps.items():
+        if any(d.kind == "edge" for d in lst):
+            deps[p] = [d for d in lst if d.kind != "single_file"]
     deployments = {
         int(ids[p]): tuple(sorted(lst, key=lambda d: (-d.clearance, d.edge or (0, 0), d.sigma)))
         for p, lst in sorted(deps.items())

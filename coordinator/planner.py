@@ -8,8 +8,6 @@ bearings of the new position (spec 4.4). No I/O, no positions.
 """
 from __future__ import annotations
 
-import dataclasses
-import math
 from dataclasses import dataclass, field
 
 from .params import TopologyParams
@@ -41,9 +39,8 @@ class JobSpec:
     deploy_landmarks/deploy_bearings: the new position's desired bearings to vertices
     (spec 4.4 assumed geometry), in f's occupant's frame.
     new_vertex: id for the new position. enter_source: base-station index whose new robot
-    refills p0, or None when p0 is a redundant vertex (left empty).
-    reclassify_on_touch: edges (vertex pairs) that become obstacle edges if the test drive
-    touches a wall.
+    refills p0, or None when p0 is a redundant vertex (left empty). frontier_edge: the fence
+    edge deployed from (None for single file / a lone robot).
     """
     path: list[int]
     direction: float
@@ -54,7 +51,6 @@ class JobSpec:
     test_drive: bool = True
     scale_correct: bool = False
     frontier_edge: tuple[int, int] | None = None
-    reclassify_on_touch: list[tuple[int, int]] = field(default_factory=list)
 
 
 @dataclass
@@ -87,12 +83,12 @@ def _reports(snap: Snapshot) -> dict[int, dict]:
 
 
 def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy: bool,
-               test_drive_failures: dict[int, float], previous_redundant: set,
+               test_drive_failures: dict[int, list[float]], previous_redundant: set,
                protected: set, max_paths: int, scale_correct: bool, test_drive: bool,
                next_vertex: int) -> CyclePlan:
     """Decide one cycle. ``next_vertex``: the first unused vertex id (for new positions).
 
-    test_drive_failures: vertex -> bearing of a test drive that touched a wall (sticky).
+    test_drive_failures: vertex -> bearings of test drives that touched a wall (sticky).
     previous_redundant: redundant vertices found earlier (used as path starts until the
     next redundancy pass). protected: vertices that must not be counted redundant.
     """
@@ -122,14 +118,6 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     else:
         plan.redundant = {v for v in previous_redundant if v in snap.occupant
                           and v not in fence.fence_vertices}
-    # at a vertex with a frontier edge, deploy off the edge (60 deg, triangles); the
-    # single-file direction (away from the neighbours) is only for vertices without one:
-    # a corridor too narrow for triangles makes the edge deployments fail their test drive
-    deps = {}
-    for v, lst in fence.deployments.items():
-        edge_deps = tuple(d for d in lst if d.kind == "edge")
-        deps[v] = edge_deps or tuple(lst)
-    fence = dataclasses.replace(fence, deployments=deps)
     plan.open_vertices = {int(v) for v, d in fence.deployments.items() if d}
     if not plan.open_vertices:
         return plan
@@ -164,14 +152,10 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
                                          old_vertex=f)
         start = pth.vertices[0]
         enter = snap.sources.index(start) if start in snap.sources else None
-        on_touch = []
-        if dep.edge is not None:
-            on_touch.append(tuple(dep.edge))
         plan.jobs.append(JobSpec(
             path=list(pth.vertices), direction=float(dep.bearing),
             deploy_landmarks=list(want), deploy_bearings=[want[v] for v in want],
             new_vertex=vid, enter_source=enter, test_drive=test_drive,
-            scale_correct=scale_correct, frontier_edge=dep.edge,
-            reclassify_on_touch=on_touch))
+            scale_correct=scale_correct, frontier_edge=dep.edge))
         vid += 1
     return plan

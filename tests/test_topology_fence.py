@@ -194,7 +194,7 @@ def test_dangling_edge_deploys_at_60_degrees_and_single_file_as_fallback():
     cx = build_complex({0: {"neighbours": {1: 0.0}}, 1: {"neighbours": {0: math.pi}}})
     f = detect_fence(cx)
     kinds = sorted(d.kind for d in f.deployments[0])
-    assert kinds == ["edge", "edge", "single_file"]
+    assert kinds == ["edge", "edge"]          # single file only once these are gone
     offs = sorted(round(abs(wrap(d.bearing)) / DEG) for d in f.deployments[0] if d.kind == "edge")
     assert offs == [60, 60]
     # corridor: both 60 deg test drives touched walls -> the edge is O; the chain end still
@@ -211,7 +211,12 @@ def test_single_file_and_isolated_robots():
     cx, f = _fence(P, default_bearing=1.0)
     assert f.z.size == 0  # dangling edges are two-sided
     assert _pairs(cx, f.frontier) == {(0, 1), (1, 2)}
-    d0, d2, d3 = f.deployments[0][0], f.deployments[2][0], f.deployments[3][0]
+    # the chain's ends deploy at 60 deg off their dangling edge first; once both of those
+    # test drives touched walls, the end continues in single file, away from its neighbour
+    assert {d.kind for d in f.deployments[0]} == {d.kind for d in f.deployments[2]} == {"edge"}
+    walls = {0: [math.pi / 3, -math.pi / 3], 2: [math.pi - math.pi / 3, -math.pi + math.pi / 3]}
+    g = detect_fence(cx, test_drive_failures=walls, default_bearing=1.0)
+    d0, d2, d3 = g.deployments[0][0], g.deployments[2][0], g.deployments[3][0]
     assert d0.kind == "single_file" and abs(wrap(d0.bearing - math.pi)) < 1e-9
     assert d2.kind == "single_file" and abs(d2.bearing) < 1e-9
     assert d0.clearance == pytest.approx(math.pi)
