@@ -416,6 +416,14 @@ def detect_fence(
     def _blocked(p: int, d: float) -> bool:
         return any(abs(wrap(d - phi)) < blocked_cone for phi in failed.get(p, ()))
 
+    def _no_room(p: int, d: float) -> bool:
+        # p cannot deploy along d: a failed test drive's cone, or p rests against a wall
+        # facing that way (its sticky contact)
+        if _blocked(p, d):
+            return True
+        c = contact(p) if cx.touch[p] else None
+        return c is not None and abs(wrap(d - c)) < blocked_cone
+
     if failed:
         for e, recs in open_sides.items():
             u, v = int(cx.edges[e, 0]), int(cx.edges[e, 1])
@@ -423,8 +431,12 @@ def detect_fence(
                 continue
             Bu, Bv = L.bearings(u), L.bearings(v)
             for sg, off_u, off_v in recs:
-                if ((off_u is not None and _blocked(u, wrap(Bu[v] + off_u)))
-                        or (off_v is not None and _blocked(v, wrap(Bv[u] + off_v)))):
+                # both ends must have no room: one touch (a door jamb, a pillar) says
+                # nothing about the other end's deployment, which goes on (a single end's
+                # failure closing the side left whole rooms behind doors uncovered)
+                nu = off_u is None or _no_room(u, wrap(Bu[v] + off_u))
+                nv = off_v is None or _no_room(v, wrap(Bv[u] + off_v))
+                if nu and nv and (u in failed or v in failed):
                     marks[(e, sg)] = "test_drive"
 
     for pair in forced_obstacle:

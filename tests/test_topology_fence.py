@@ -172,17 +172,33 @@ def test_test_drive_failure_reclassifies_the_touched_side_only():
     P = np.array([[0.0, 0.0], [s, 0.0], [s / 2, s * math.sqrt(3) / 2]])
     cx, f = _fence(P)
     dep = [d for d in f.deployments[0] if d.edge == (0, 1)][0]
-    f2 = detect_fence(cx, test_drive_failures={0: dep.bearing})
-    # the wall felt below edge 0-1 blocks deployments within 90 deg of the touch: edge 0-1's
-    # open side becomes O; edge 0-2 deploys at 120 deg (180 deg from the touch) and stays K
+    f1 = detect_fence(cx, test_drive_failures={0: dep.bearing})
+    # the wall felt below edge 0-1 blocks 0's deployments within 90 deg of the touch; edge
+    # 0-2 deploys at 120 deg (180 deg from the touch) and stays. One end's touch does not
+    # close the side: robot 1 still deploys into it (a door jamb is not a wall)
+    assert all(abs(wrap(d.bearing - dep.bearing)) >= math.pi / 2 for d in f1.deployments[0])
+    assert [d.edge for d in f1.deployments[0]] == [(0, 2)]
+    assert _pairs(cx, f1.frontier) == {(0, 1), (0, 2), (1, 2)}
+    assert (0, 1) in [d.edge for d in f1.deployments[1]]
+    # robot 1's test drive into that side touched too: now the side is O
+    dep1 = [d for d in f.deployments[1] if d.edge == (0, 1)][0]
+    f2 = detect_fence(cx, test_drive_failures={0: dep.bearing, 1: [dep1.bearing]})
     assert _pairs(cx, f2.obstacle) == {(0, 1)}
     assert _pairs(cx, f2.frontier) == {(0, 2), (1, 2)}
     assert {f2.by_index[e].sides[0].reason for e in f2.obstacle} == {"test_drive"}
-    assert all(abs(wrap(d.bearing - dep.bearing)) >= math.pi / 2 for d in f2.deployments[0])
-    assert [d.edge for d in f2.deployments[0]] == [(0, 2)]
-    # a second failure, toward the 0-2 deployment, closes that side too
+    # or robot 1 rests against a wall on that side (its contact counts as no room)
+    cx_t = build_complex({
+        0: {"neighbours": {1: cx.bearing(0, 1), 2: cx.bearing(0, 2)}},
+        1: {"neighbours": {0: cx.bearing(1, 0), 2: cx.bearing(1, 2)}, "touch": True,
+            "touch_bearing": -math.pi / 2},
+        2: {"neighbours": {0: cx.bearing(2, 0), 1: cx.bearing(2, 1)}}})
+    f5 = detect_fence(cx_t, test_drive_failures={0: dep.bearing})
+    assert _pairs(cx_t, f5.obstacle) == {(0, 1)}
+    # failures toward both of 0's deployments, and 2's toward 0-2: that side closes too
     dep2 = f2.deployments[0][0]
-    f4 = detect_fence(cx, test_drive_failures={0: [dep.bearing, dep2.bearing]})
+    dep20 = [d for d in f.deployments[2] if d.edge == (0, 2)][0]
+    f4 = detect_fence(cx, test_drive_failures={0: [dep.bearing, dep2.bearing],
+                                               1: [dep1.bearing], 2: [dep20.bearing]})
     assert _pairs(cx, f4.obstacle) == {(0, 1), (0, 2)}
     assert 0 not in f4.deployments
     # a forced obstacle edge (remembered from an earlier cycle) is an obstacle edge
@@ -199,7 +215,10 @@ def test_dangling_edge_deploys_at_60_degrees_and_single_file_as_fallback():
     assert offs == [60, 60]
     # corridor: both 60 deg test drives touched walls -> the edge is O; the chain end still
     # extends in single file, away from its neighbour
-    f2 = detect_fence(cx, test_drive_failures={0: [60 * DEG, -60 * DEG]})
+    f1 = detect_fence(cx, test_drive_failures={0: [60 * DEG, -60 * DEG]})
+    assert int(cx.edge_index(0, 1)) in f1.frontier.tolist()   # 1 has not tried yet
+    f2 = detect_fence(cx, test_drive_failures={0: [60 * DEG, -60 * DEG],
+                                               1: [math.pi - 60 * DEG, -math.pi + 60 * DEG]})
     assert int(cx.edge_index(0, 1)) in f2.obstacle.tolist()
     assert [d.kind for d in f2.deployments[0]] == ["single_file"]
     assert abs(wrap(f2.deployments[0][0].bearing - math.pi)) < 1e-9
