@@ -406,8 +406,10 @@ class Deployer:
         self._set_phase("execute", now)
 
     def _finish(self, plan: CyclePlan, now: float) -> None:
-        if self.cfg.final_recheck and not self.final_pass and plan.redundant:
-            # spec 5.4: final redundancy pass; redundant robots go idle, then re-certify
+        if self.cfg.final_recheck and plan.redundant:
+            # spec 5.4: the redundant robots go idle, then the rest re-certify with another
+            # redundancy pass; repeated until a pass finds none (each pass removes >= 1).
+            # (The last pass's finds used to stay in the complex and count as used.)
             self.final_pass = True
             for v in sorted(plan.redundant):
                 rid = self.snapshot.occupant.get(v)
@@ -518,6 +520,15 @@ class Deployer:
                 if not job.aborted:
                     self._test_drive_failed(job, td)
                 return
+            if (td.reason != "wall" and dep.state == "pending" and not self.cfg.refine_deploy
+                    and self.params.d_td >= self.cfg.d0 - 1e-3 * self.cfg.rv):
+                # room all the way to d0: the robot is the new vertex where the drive ended
+                # (a shorter test drive goes on with the deploy and refine steps)
+                dep.state, dep.reason = "done", "placed by the test drive"
+                self._step_done(job, dep)
+                ref = job.step("refine")
+                if ref is not None and ref.state == "pending":
+                    ref.state, ref.reason = "cancelled", "placed by the test drive"
             if td.reason == "wall" and dep.state == "pending":
                 # the test drive ended against a wall far enough out: that is the new vertex
                 dep.state, dep.reason = "done", "wall"
@@ -544,7 +555,9 @@ class Deployer:
                     break
             prev = mv
         ent = job.step("enter")
-        at_f = prev  # the step that brings a robot to f (last mover, or the entering robot)
+        # the step that brings a robot to f: the mover p_{m-1} -> f (not the last mover
+        # visited above, which is p0 -> p1), or the entering robot on a one-vertex path
+        at_f = job.step("move", len(path) - 2) if len(path) >= 2 else prev
         if ent is not None:
             if ent.state == "pending" and prev.state != "pending":
                 self._advance_enter(job, ent, prev, sequential, now)
