@@ -74,7 +74,11 @@ def _start_live(procs, zargs):
             st = _get_json(url + "state")
         except OSError:
             st = {}
-        if st.get("cycle") == CYCLES - 1 and st.get("alive") == expected and st.get("map_version"):
+        # liveliness and the world's truth arrive separately: wait until both show the
+        # robots of the last cycle (a robot spawned in it can be alive before its body)
+        bodies = sorted(r[0] for r in st.get("robots") or [])
+        if (st.get("cycle") == CYCLES - 1 and st.get("alive") == expected and bodies == expected
+                and st.get("map_version")):
             break
         time.sleep(0.2)
     assert st.get("cycle") == CYCLES - 1, st
