@@ -34,9 +34,10 @@ class CoordinatorConfig:
     refine_deploy: bool = False    # re-home a new robot on the assumed geometry of spec 4.4
                                    # (equilateral on its parent edge, then scale correction)
                                    # after a clear test drive. Off: it stays where the drive
-                                   # ended, d0 from its parent (when d_td >= d0). The assumed geometry inherits
-                                   # the parent edge's length, so spacing shrank cycle after
-                                   # cycle: 6 m x 4 m room, 4 seeds: 57.8 -> 51.2 robots
+                                   # ended, d0 from its parent (when d_td >= d0). The assumed
+                                   # geometry inherits the parent edge's length, so spacing
+                                   # shrank cycle after cycle: 6 m x 4 m room, seeds 0-3,
+                                   # mean: 57.8 -> 51.2 robots
     redundancy_period: int = 10    # T_H: cycles between redundancy passes
     scale_correct_period: int = 5  # run scale correction on a new frontier robot every N cycles
     push_mode: str = "parallel"    # "parallel": movers along a path go at once where >= 2 static

@@ -317,8 +317,9 @@ def detect_fence(
 
     test_drive_failures: node id -> bearing, or list of bearings (rad, that robot's body
       frame), of test drives that touched an obstacle (spec 3.4(iv)); its deployments
-      within 90 deg of a touch are dropped and the fence sides they served become
-      obstacle sides.
+      within 90 deg of a touch are dropped, and a fence side they served becomes an
+      obstacle side once the edge's other end has no room on it either (its own failed
+      drive, or a wall contact within 90 deg of its deployment).
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
       e.g. edges reclassified after a failed test drive in an earlier cycle.
     default_bearing: deployment direction (rad, body frame) of a robot with no
