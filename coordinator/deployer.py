@@ -478,11 +478,14 @@ class Deployer:
     def _advance_job(self, job: PushJob, now: float) -> None:
         """Start every step of a push whose preconditions hold (spec 4.3).
 
-        Order: test drive at f; deploy f's robot (open loop, or homing when >= 2 static
-        landmarks); movers from the front (p_{m-1} -> f first), each at once in parallel
-        mode when its target has >= 2 static landmarks, else when the robot ahead arrived;
-        a new robot enters p0 from the base; finally the deployed robot refines its
-        position with every landmark, including the robot now at f (and scale correction).
+        Order: test drive at f (by default a clear drive of d0 places the new robot, and
+        deploy and refine are skipped; a touch 0.45-0.9 rv out leaves it at the wall);
+        otherwise deploy f's robot (open loop, or homing when >= 2 static landmarks);
+        movers from the front (p_{m-1} -> f first), each at once in parallel mode when its
+        target has >= 2 static landmarks, else when the robot ahead arrived; a new robot
+        enters p0 from the base; finally (refine_deploy, or a test drive shorter than d0)
+        the deployed robot refines its position with every landmark, including the robot
+        now at f (and scale correction).
         """
         spec = job.spec
         path = spec.path
