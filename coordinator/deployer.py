@@ -479,7 +479,7 @@ class Deployer:
         """Start every step of a push whose preconditions hold (spec 4.3).
 
         Order: test drive at f (by default a clear drive of d0 places the new robot, and
-        deploy and refine are skipped; a touch 0.45-0.9 rv out leaves it at the wall);
+        deploy and refine are skipped; a touch past wall_keep_rv leaves it at the wall);
         otherwise deploy f's robot (open loop, or homing when >= 2 static landmarks);
         movers from the front (p_{m-1} -> f first), each at once in parallel mode when its
         target has >= 2 static landmarks, else when the robot ahead arrived; a new robot
