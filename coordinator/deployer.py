@@ -523,22 +523,14 @@ class Deployer:
                 if not job.aborted:
                     self._test_drive_failed(job, td)
                 return
-            if (td.reason != "wall" and dep.state == "pending" and not self.cfg.refine_deploy
-                    and self.params.d_td >= self.cfg.d0 - 1e-3 * self.cfg.rv):
-                # room all the way to d0: the robot is the new vertex where the drive ended
-                # (a shorter test drive goes on with the deploy and refine steps)
-                dep.state, dep.reason = "done", "placed by the test drive"
+            placed = self._placed_by(td)
+            if placed and dep.state == "pending":
+                # the robot is the new vertex where its drive ended: no deploy, no refine
+                dep.state, dep.reason = "done", placed
                 self._step_done(job, dep)
                 ref = job.step("refine")
                 if ref is not None and ref.state == "pending":
-                    ref.state, ref.reason = "cancelled", "placed by the test drive"
-            if td.reason == "wall" and dep.state == "pending":
-                # the test drive ended against a wall far enough out: that is the new vertex
-                dep.state, dep.reason = "done", "wall"
-                self._step_done(job, dep)
-                ref = job.step("refine")
-                if ref is not None and ref.state == "pending":
-                    ref.state, ref.reason = "cancelled", "at a wall"
+                    ref.state, ref.reason = "cancelled", placed
         if dep.state == "pending":
             self._start(dep, self._task_deploy(spec, job), now)
         sequential = self.cfg.push_mode == "sequential"
@@ -645,6 +637,16 @@ class Deployer:
         if s.name == "move" and s.t_index == 0 and job.spec.enter_source is None:
             # p0 was a redundant vertex: it is left empty
             self.redundant.discard(job.spec.path[0])
+
+    def _placed_by(self, td: Step) -> str:
+        """Why a finished test drive already placed the new robot, or "": it stopped at a
+        wall past wall_keep_rv ("wall"), or it drove clear all the way to d0 and
+        refine_deploy is off (a shorter drive goes on with the deploy and refine steps)."""
+        if td.reason == "wall":
+            return "wall"
+        if not self.cfg.refine_deploy and self.params.d_td >= self.cfg.d0 - 1e-3 * self.cfg.rv:
+            return "placed by the test drive"
+        return ""
 
     def _test_drive_failed(self, job: PushJob, td: Step) -> None:
         spec = job.spec

@@ -422,7 +422,7 @@ def detect_fence(
         # facing that way (its sticky contact)
         if _blocked(p, d):
             return True
-        c = contact(p) if cx.touch[p] else None
+        c = contact(p)
         return c is not None and abs(wrap(d - c)) < blocked_cone
 
     if failed:
@@ -437,7 +437,7 @@ def detect_fence(
                 # failure closing the side left whole rooms behind doors uncovered)
                 nu = off_u is None or _no_room(u, wrap(Bu[v] + off_u))
                 nv = off_v is None or _no_room(v, wrap(Bv[u] + off_v))
-                if nu and nv and (u in failed or v in failed):
+                if nu and nv:
                     marks[(e, sg)] = "test_drive"
 
     for pair in forced_obstacle:

@@ -252,6 +252,7 @@ def main(argv: list[str] | None = None) -> int:
         cfg, resolved = resolve_config(args.config, args)
         from world.maps import build_map
         wmap = build_map(cfg)
+        live_limits = _live_limits(cfg, resolved, str(args.config))
     except (ValueError, OSError) as e:
         print(f"swarmcover run: {e}", file=sys.stderr)
         return 2
@@ -283,7 +284,7 @@ def main(argv: list[str] | None = None) -> int:
             launcher.start("world", ["world", conf_path]).wait_ready("READY world", 60)
             session = _open(endpoint, swarm)
             rc = _supervise(args, cfg, wmap, conf_path, launcher, session, Keys(swarm), out,
-                            stop, state, t_wall0)
+                            stop, state, t_wall0, live_limits)
         except RuntimeError as e:
             log.error("%s", e)
             state["reason"] = str(e).splitlines()[0]
@@ -316,24 +317,24 @@ def _agent_args(spawn: Spawn, conf_path: str, live_limits: dict) -> list[str]:
     a = ["agent", "--id", str(spawn.robot), "--kind", spawn.kind, "--run-config", conf_path]
     if spawn.live:
         a.append("--live")
-        v_max, w_max = live_limits.get(spawn.robot, (None, None))
-        if v_max is not None:
-            a += ["--v-max", str(v_max)]
-        if w_max is not None:
-            a += ["--param", f"w_max={float(w_max)}"]
+        if spawn.robot in live_limits:
+            v_max, w_max = live_limits[spawn.robot]
+            a += ["--v-max", str(v_max), "--param", f"w_max={float(w_max)}"]
     return a
 
 
-def _live_limits(cfg) -> dict:
-    out = {}
-    for r in cfg.section("hwbridge").get("robots", []) or []:
-        if isinstance(r, dict) and isinstance(r.get("id"), int):
-            out[r["id"]] = (r.get("v_max"), r.get("w_max"))
-    return out
+def _live_limits(cfg, resolved: str, where: str) -> dict:
+    """Live robot id -> (v_max, w_max) as the bridge clamps them (its own config parser,
+    defaults from [robots] included); {} without a [hwbridge] section. A bad [hwbridge]
+    section raises its ConfigError (a ValueError naming the field) before anything starts."""
+    if not cfg.section("hwbridge"):
+        return {}
+    from hwbridge.config import loads
+    return {r.id: (r.v_max, r.w_max) for r in loads(resolved, where).robots}
 
 
 def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Keys, out: Path,
-               stop: Shutdown, state: dict, t_wall0: float) -> int:
+               stop: Shutdown, state: dict, t_wall0: float, live_limits: dict) -> int:
     from swarmcover.progress import Progress
     rx = Receiver(log)
     mb = Mailbox()
@@ -343,7 +344,6 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
     recorder = None
     last_cx: Complex | None = None
     last_truth: Truth | None = None
-    live_limits = _live_limits(cfg)
     cycles_f = open(out / "cycles.jsonl", "w")
     spawned = 0
     progress = Progress(label=cfg.name, enabled=not args.quiet, every_s=10.0)

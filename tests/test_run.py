@@ -102,3 +102,24 @@ def test_killed_agents_and_coordinator_are_healed(procs, tmp_path):
     assert "robot 3 failed" in log
     assert "resuming with" in log
     _no_leftovers(out)
+
+
+def test_live_agents_plan_with_the_bridge_limits_and_a_bad_bridge_stops_run_first(tmp_path,
+                                                                                  capsys):
+    from bus.messages import Spawn
+    from swarmcover.run import _agent_args, _live_limits, build_parser, main, resolve_config
+    args = build_parser().parse_args(["configs/mixed.toml"])
+    cfg, resolved = resolve_config("configs/mixed.toml", args)
+    limits = _live_limits(cfg, resolved, "configs/mixed.toml")
+    assert set(limits) == {1, 2}
+    a = _agent_args(Spawn(robot=1, source=0, kind="diffdrive", live=True), "r.toml", limits)
+    assert a[a.index("--v-max") + 1] == "0.3" and a[a.index("--param") + 1] == "w_max=2.0"
+    v = _agent_args(Spawn(robot=5, source=0, kind="holonomic"), "r.toml", limits)
+    assert "--v-max" not in v and "--live" not in v
+    # the bridge's own parser checks [hwbridge] before any process starts
+    bad = tmp_path / "bad.toml"
+    bad.write_text(Path("configs/mixed.toml").read_text().replace("v_max = 0.3", "v_max = -1", 1))
+    assert main([str(bad), "--out", str(tmp_path / "run"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "v_max" in err and "-1" in err
+    assert not (tmp_path / "run" / "logs").exists()
