@@ -1,6 +1,7 @@
 """swarmcover coordinator: the topology core (pure functions, no I/O).
 
-Works on node ids, neighbour bearings (rad, body frame) and touch flags; never positions.
+Works on node ids, neighbour bearings (rad, body frame) and touch flags; never measured
+positions (``shape`` estimates the swarm's shape from those bearings).
 """
 from .angles import circular_mean, wrap
 from .certificate import Certificate, boundary_of, certify, fence_cycle, is_cocycle, verify_certificate
@@ -10,6 +11,7 @@ from .gvg import GVG, compute_gvg, gvg_thin, gvg_wavefront, obstacle_segments
 from .params import TopologyParams
 from .paths import PushPath, deployment_point, plan_pushes
 from .redundancy import Redundancy, find_redundant, link_is_acyclic
+from .shape import Lattice, align_headings, estimate_shape, lattice_target
 from .targets import MoveTarget, frontier_desired_bearings, plan_push_targets, push_desired_bearings
 
 __all__ = [
@@ -48,4 +50,8 @@ __all__ = [
     "gvg_thin",
     "compute_gvg",
     "obstacle_segments",
+    "align_headings",
+    "estimate_shape",
+    "Lattice",
+    "lattice_target",
 ]

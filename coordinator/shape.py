@@ -1,0 +1,263 @@
+"""The swarm's shape from bearings alone, and lattice targets for new robots.
+
+Bearings between robots that see each other fix a triangulated swarm's shape up to
+translation, rotation and scale (bearing rigidity); the distances the coordinator itself
+commanded (a new robot's clear test drive of known length from its parent vertex) fix the
+scale. Nothing here uses positions from outside the swarm.
+
+* ``align_headings(nbrs, kinds)``: each occupant's body-frame heading relative to a root
+  (spec 4.7's mutual-bearing relation, averaged over a spanning-tree sweep); all zero when
+  every robot is holonomic (their frames are parallel).
+* ``estimate_shape(nbrs, headings, known)``: vertex positions in the root's frame (rv
+  units) by linear least squares on the bearing constraints n(beta_uv) . (x_v - x_u) = 0
+  and the known lengths b(beta_uv) . (x_v - x_u) = d.
+* ``lattice_target(...)``: the point of a triangular lattice of spacing d0 that a frontier
+  robot should deploy to: beyond the fence edge, within reach of both its ends, not next
+  to any robot already there.
+
+Pure functions over numpy/scipy, no I/O.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Iterable, Mapping
+
+import numpy as np
+from scipy.sparse import coo_matrix, identity
+from scipy.sparse.linalg import spsolve
+
+from .angles import wrap
+
+__all__ = ["align_headings", "estimate_shape", "Lattice", "lattice_target"]
+
+
+def align_headings(nbrs: Mapping[int, Mapping[int, float]], kinds: Mapping[int, str] | None = None,
+                   root: int | None = None, iterations: int = 2) -> dict[int, float]:
+    """Heading (rad) of each vertex's occupant relative to ``root``'s (root = 0).
+
+    Two robots a, b that see each other satisfy phi_a - phi_b = wrap(th^b_a - th^a_b + pi)
+    (spec 4.7). Breadth-first from the root over mutual edges, each vertex takes the
+    circular mean of what its already-placed neighbours imply; then ``iterations``
+    least-squares rounds over every mutual edge. Vertices reached by no
+    mutual edge get 0. With every robot holonomic (no rotation), all headings are 0.
+    """
+    verts = sorted(int(v) for v in nbrs)
+    if not verts:
+        return {}
+    if kinds is not None and all(k == "holonomic" for k in kinds.values()):
+        return {v: 0.0 for v in verts}
+    root = verts[0] if root is None or root not in nbrs else int(root)
+    phi = {root: 0.0}
+    queue = deque([root])
+    while queue:
+        a = queue.popleft()
+        for b in nbrs.get(a, {}):
+            b = int(b)
+            if b in phi or b not in nbrs:
+                continue
+            s = c = 0.0
+            for w, th_bw in nbrs[b].items():  # every placed mutual neighbour of b votes
+                w = int(w)
+                if w in phi and b in nbrs.get(w, {}):
+                    est = phi[w] - wrap(nbrs[b][w] - nbrs[w][b] + math.pi)
+                    s += math.sin(est)
+                    c += math.cos(est)
+            if s == 0.0 and c == 0.0:
+                continue
+            phi[b] = math.atan2(s, c)
+            queue.append(b)
+    # least squares over every mutual edge (Gauss-Newton on the wrapped residuals): the
+    # spanning tree's chained noise is spread over all the loops (the root stays at 0)
+    placed = sorted(phi)
+    if len(placed) > 1:
+        col = {v: k for k, v in enumerate(placed)}
+        for _ in range(iterations):
+            rows, cols, vals, rhs = [], [], [], []
+            r = 0
+            for a in placed:
+                for b, th_ab in nbrs[a].items():
+                    b = int(b)
+                    if b in col and a < b and a in nbrs.get(b, {}):
+                        meas = wrap(nbrs[b][a] - th_ab + math.pi)  # phi_a - phi_b
+                        rows += [r, r]
+                        cols += [col[a], col[b]]
+                        vals += [1.0, -1.0]
+                        rhs.append(wrap(meas - (phi[a] - phi[b])))
+                        r += 1
+            rows.append(r)
+            cols.append(col[root])
+            vals.append(10.0)
+            rhs.append(0.0)
+            r += 1
+            A = coo_matrix((vals, (rows, cols)), shape=(r, len(placed))).tocsr()
+            M = (A.T @ A + 1e-9 * identity(len(placed), format="csr")).tocsc()
+            delta = spsolve(M, A.T @ np.asarray(rhs, float))
+            for v in placed:
+                phi[v] = wrap(phi[v] + float(delta[col[v]]))
+    return {v: phi.get(v, 0.0) for v in verts}
+
+
+def estimate_shape(nbrs: Mapping[int, Mapping[int, float]], headings: Mapping[int, float],
+                   known: Iterable[tuple[int, int, float]] = (), *, root: int | None = None,
+                   default_edge: float = 0.85) -> dict[int, np.ndarray]:
+    """Vertex positions (root's frame, rv units) from bearings and known lengths.
+
+    nbrs: vertex -> {neighbour vertex: bearing (rad, occupant's body frame)}. headings:
+    from :func:`align_headings`. known: (a, b, length) for vertex pairs whose distance the
+    coordinator commanded. The shape comes from the bearings alone, with the mean edge
+    pinned to 1 (noisy bearing rows would otherwise pull the estimate to shrink); the
+    scale is then the median of known length / estimated length over the known pairs
+    (robust to pairs that drifted since), or ``default_edge`` without any. Only the
+    connected component of ``root`` (default: the lowest vertex) is returned.
+    """
+    verts = sorted(int(v) for v in nbrs)
+    if not verts:
+        return {}
+    root = verts[0] if root is None or root not in nbrs else int(root)
+    comp = {root}
+    stack = [root]
+    while stack:
+        a = stack.pop()
+        for b in nbrs.get(a, {}):
+            b = int(b)
+            if b in nbrs and b not in comp:
+                comp.add(b)
+                stack.append(b)
+    order = sorted(comp)
+    if len(order) == 1:
+        return {root: np.zeros(2)}
+    col = {v: i for i, v in enumerate(order)}
+    rows, cols, vals, rhs = [], [], [], []
+    r = 0
+
+    def add(a: int, b: int, ux: float, uy: float, w: float, target: float) -> None:
+        nonlocal r
+        ia, ib = col[a], col[b]
+        rows.extend((r, r, r, r))
+        cols.extend((2 * ib, 2 * ib + 1, 2 * ia, 2 * ia + 1))
+        vals.extend((w * ux, w * uy, -w * ux, -w * uy))
+        rhs.append(w * target)
+        r += 1
+
+    world = {}
+    for a in order:
+        pa = headings.get(a, 0.0)
+        for b, th in nbrs[a].items():
+            b = int(b)
+            if b in col and b != a:
+                beta = pa + th
+                world[(a, b)] = beta
+                add(a, b, -math.sin(beta), math.cos(beta), 1.0, 0.0)
+    # scale gauge: the mean of the edges' lengths along their bearings is 1
+    m = len(world)
+    w = 10.0 * math.sqrt(m)
+    for (a, b), beta in world.items():
+        ia, ib = col[a], col[b]
+        c, s_ = math.cos(beta) * w / m, math.sin(beta) * w / m
+        rows.extend((r, r, r, r))
+        cols.extend((2 * ib, 2 * ib + 1, 2 * ia, 2 * ia + 1))
+        vals.extend((c, s_, -c, -s_))
+    rhs.append(w)
+    r += 1
+    # translation gauge: the root at the origin
+    i0 = col[root]
+    for k in range(2):
+        rows.append(r)
+        cols.append(2 * i0 + k)
+        vals.append(10.0)
+        rhs.append(0.0)
+        r += 1
+    A = coo_matrix((vals, (rows, cols)), shape=(r, 2 * len(order))).tocsr()
+    # normal equations, with a whisker of ridge so flexible parts (a single-file chain of
+    # unknown length) stay finite instead of making the system singular
+    M = (A.T @ A + 1e-9 * identity(2 * len(order), format="csr")).tocsc()
+    sol = spsolve(M, A.T @ np.asarray(rhs, float)).reshape(-1, 2)
+    ratios = []
+    for a, b, d in known:
+        a, b = int(a), int(b)
+        if a in col and b in col and ((a, b) in world or (b, a) in world) and d > 0:
+            est = float(np.hypot(*(sol[col[b]] - sol[col[a]])))
+            if est > 1e-9:
+                ratios.append(d / est)
+    scale = float(np.median(ratios)) if ratios else float(default_edge)
+    return {v: scale * sol[col[v]] for v in order}
+
+
+class Lattice:
+    """A triangular lattice of spacing d: origin (2,), first axis angle (rad)."""
+
+    def __init__(self, origin, angle: float, d: float):
+        self.origin = np.asarray(origin, float).reshape(2)
+        self.d = float(d)
+        self._angle = float(angle)
+        a1 = np.array([math.cos(angle), math.sin(angle)])
+        a2 = np.array([math.cos(angle + math.pi / 3), math.sin(angle + math.pi / 3)])
+        self.basis = self.d * np.stack([a1, a2], 1)  # columns a1, a2
+
+    def fitted(self, points) -> "Lattice":
+        """The same lattice shifted to fit ``points`` (n, 2) best: the circular mean of
+        their offsets within the lattice cell. Estimated positions drift (the root's
+        robot is replaced, the scale is estimated); fitting the lattice to the robots
+        near a deployment keeps the new one on the lattice its neighbours are on."""
+        P = np.asarray(points, float).reshape(-1, 2)
+        if not len(P):
+            return self
+        c = np.linalg.solve(self.basis, (P - self.origin).T)  # (2, n) lattice coordinates
+        z = np.exp(2j * np.pi * c).mean(axis=1)
+        shift = np.angle(z) / (2 * np.pi)
+        return Lattice(self.origin + self.basis @ shift, self._angle, self.d)
+
+    def near(self, p, rings: int = 2) -> np.ndarray:
+        """Lattice points around p (within ``rings`` lattice steps of its cell)."""
+        c = np.linalg.solve(self.basis, np.asarray(p, float) - self.origin)
+        i0, j0 = (int(math.floor(x)) for x in c)
+        ii, jj = np.mgrid[i0 - rings:i0 + rings + 2, j0 - rings:j0 + rings + 2]
+        ij = np.stack([ii.ravel(), jj.ravel()], 0).astype(float)
+        return self.origin + (self.basis @ ij).T
+
+
+def lattice_target(lattice: Lattice, pf, po, side_dir, others, *, reach: float,
+                   min_sep: float, min_dist: float, blocked=(), side_from=None) -> np.ndarray | None:
+    """The lattice point a frontier robot at pf deploys to, or None.
+
+    po: the fence edge's other end, which the point must also be within ``reach`` of
+    (None: no such condition). side_dir: unit vector into the open side (the spec's own
+    direction); side_from: the point whose line through pf bounds the open side (default
+    po; None with po None: the half-plane facing side_dir). others: (n, 2) estimated
+    positions of robots and of this cycle's other targets; a candidate keeps ``min_sep``
+    from each and ``min_dist`` from pf. blocked: directions (rad) of walls felt at pf; a
+    candidate within 90 deg of one is out. Of the rest, the one nearest the spec's target
+    pf + d * side_dir wins.
+    """
+    pf = np.asarray(pf, float)
+    u = np.asarray(side_dir, float)
+    L = lattice.near(pf)
+    rel = L - pf
+    df = np.hypot(rel[:, 0], rel[:, 1])
+    ok = (df <= reach) & (df >= min_dist)
+    ref = po if side_from is None else side_from
+    if ref is not None:
+        fo = np.asarray(ref, float) - pf
+        side = np.sign(fo[0] * u[1] - fo[1] * u[0])
+        if side == 0:
+            return None
+        ok &= np.sign(fo[0] * rel[:, 1] - fo[1] * rel[:, 0]) == side
+    else:
+        ok &= rel @ u > 0
+    if po is not None:
+        ok &= np.hypot(*(L - np.asarray(po, float)).T) <= reach
+    ang = np.arctan2(rel[:, 1], rel[:, 0])
+    for w in blocked:
+        ok &= np.cos(ang - w) <= 0.0
+    L = L[ok]
+    if not len(L):
+        return None
+    Q = np.asarray(others, float).reshape(-1, 2)
+    if len(Q):
+        dmin = np.min(np.linalg.norm(L[:, None, :] - Q[None, :, :], axis=2), axis=1)
+        L = L[dmin >= min_sep]
+        if not len(L):
+            return None
+    want = pf + lattice.d * u
+    return L[int(np.argmin(np.linalg.norm(L - want, axis=1)))]
