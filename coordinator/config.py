@@ -31,6 +31,10 @@ class CoordinatorConfig:
                                    # 3.4(iv)); a touch farther out keeps the robot there, against
                                    # the wall, as the new vertex (a far touch says nothing about
                                    # the ground between the edge and the wall)
+    lattice: bool = True           # new positions on one triangular lattice of spacing d0
+                                   # through the source, from the swarm's bearing-only
+                                   # shape estimate (holonomic swarms); false: the spec's
+                                   # 60-deg rule at d_td
     refine_deploy: bool = False    # re-home a new robot on the assumed geometry of spec 4.4
                                    # (equilateral on its parent edge, then scale correction)
                                    # after a clear test drive. Off: it stays where the drive
@@ -46,6 +50,8 @@ class CoordinatorConfig:
     robots_max: int = 400          # stop (not certified) if more would be needed
     task_timeout_s: float = 40.0   # per task, simulated seconds
     spawn_timeout_s: float = 60.0  # new agent must report within this (sim s)
+    settle_moves: bool = True      # a mover that homed on < 2 landmarks homes again on all of
+                                   # its vertex's landmarks once its push is over
     settle_s: float = 0.6          # wait after a cycle's last task before re-planning (sim s)
     dead_after_cycles: int = 3     # heartbeat: robot with no status for this many cycles is dead
     dead_grace_s: float = 3.0      # a robot whose liveliness token stays gone this long (sim s)

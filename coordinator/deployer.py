@@ -25,6 +25,11 @@ from .planner import CyclePlan, JobSpec, Snapshot, plan_cycle
 
 log = logging.getLogger("swarmcover.coordinator")
 
+
+def td_length(spec: JobSpec, params) -> float:
+    """How far a job's test drive goes: the planner's distance, else the configured d_td."""
+    return params.d_td if spec.distance is None else spec.distance
+
 SETTLED_STATES = ("holding", "idle")
 
 
@@ -44,7 +49,7 @@ class Robot:
 @dataclass
 class Step:
     """One robot's task within a push job."""
-    name: str                     # "test_drive", "deploy", "move", "enter"
+    name: str                     # "test_drive", "deploy", "move", "enter", "refine", "settle"
     robot: int                    # -1 for "enter" until the new robot exists
     target: int                   # target vertex id
     t_index: int = -1             # for "move": index t of p_t -> p_{t+1}
@@ -52,6 +57,7 @@ class Step:
     state: str = "pending"        # pending, running, done, failed, cancelled
     reason: str = ""
     started_t: float = 0.0
+    n_landmarks: int = -1         # landmarks of the goto/hold task it was started with
 
 
 @dataclass
@@ -93,6 +99,7 @@ class Deployer:
         self.planner = planner
         self.robots: dict[int, Robot] = {}
         self.vertex_of: dict[int, int] = {}          # robot -> vertex
+        self.known: list[tuple[int, int, float]] = []  # (f, new vertex, drive length, rv units)
         self.contact: dict[int, float] = {}          # vertex -> sticky contact bearing
         self.td_failures: dict[int, list[float]] = {}  # vertex -> failed test-drive bearings
         self.redundant: set[int] = set()             # vertices
@@ -291,9 +298,10 @@ class Deployer:
         occupant = {v: r for r, v in vert.items()}
         contact = {v: b for v, b in self.contact.items() if v in occupant}
         kinds = {v: self.robots[r].kind for v, r in occupant.items()}
+        known = [(a, b, d) for a, b, d in self.known if a in occupant and b in occupant]
         return Snapshot(occupant=occupant, nbrs=nbrs, contact=contact, kinds=kinds,
                         sources=[k for k in range(len(self.sources)) if k in occupant],
-                        source_dirs=self.sources)
+                        source_dirs=self.sources, known=known)
 
     def _take_snapshot(self) -> Snapshot:
         snap = self.snapshot = self.build_snapshot()
@@ -337,7 +345,8 @@ class Deployer:
             previous_redundant=self.redundant, protected=moving, max_paths=self.cfg.max_paths,
             scale_correct=(self.cfg.scale_correct_period > 0
                            and self.cycle % self.cfg.scale_correct_period == 0),
-            test_drive=self.cfg.test_drive, next_vertex=self.next_vertex)
+            test_drive=self.cfg.test_drive, next_vertex=self.next_vertex,
+            lattice_spacing=self.cfg.d0 if self.cfg.lattice else None)
         self.next_vertex += len(plan.jobs)
         self.redundant = set(plan.redundant)
         self._out.append(("complex", self._complex_msg(plan, now, "running")))
@@ -523,9 +532,11 @@ class Deployer:
                 if not job.aborted:
                     self._test_drive_failed(job, td)
                 return
-            placed = self._placed_by(td)
+            placed = self._placed_by(td, spec)
             if placed and dep.state == "pending":
                 # the robot is the new vertex where its drive ended: no deploy, no refine
+                if placed != "wall":  # a clear drive: the new vertex is that far from f
+                    self.known.append((path[-1], spec.new_vertex, td_length(spec, self.params)))
                 dep.state, dep.reason = "done", placed
                 self._step_done(job, dep)
                 ref = job.step("refine")
@@ -566,6 +577,29 @@ class Deployer:
                 ref.state = "cancelled"
             else:
                 self._start(ref, task, now)
+        if self.cfg.settle_moves:
+            self._settle_moves(job, now)
+
+    def _settle_moves(self, job: PushJob, now: float) -> None:
+        """Once a push is over, every robot that moved to its vertex on fewer than two
+        landmarks homes again on all of that vertex's landmarks, now static.
+
+        One bearing fixes a ray, not a point: a mover whose other landmarks were moving
+        (the source being refilled behind it, the robot ahead on the path) stops wherever
+        it first meets that ray, and the vertex drifts from where the graph has it."""
+        if job.aborted or any(s.state in ("pending", "running") for s in job.steps
+                              if s.name != "settle"):
+            return
+        for s in list(job.steps):
+            if (s.name in ("move", "enter") and s.state == "done" and 0 <= s.n_landmarks < 2
+                    and job.step("settle", s.t_index) is None and self._live(s.robot)):
+                st = Step("settle", s.robot, s.target, t_index=s.t_index)
+                job.steps.append(st)
+                task = self._task_settle(job, s.robot, s.target)
+                if task is None:
+                    st.state, st.reason = "cancelled", "fewer than 2 landmarks"
+                else:
+                    self._start(st, task, now)
 
     def _advance_enter(self, job: PushJob, ent: Step, prev: Step, sequential: bool,
                        now: float) -> None:
@@ -602,6 +636,8 @@ class Deployer:
                 s.state, s.reason = "cancelled", why
 
     def _start(self, s: Step, task: Task, now: float) -> None:
+        if task.kind in ("goto", "hold"):
+            s.n_landmarks = len(task.landmarks)
         s.task_id = self._send(s.robot, task, now)
         s.state = "running"
         s.started_t = now
@@ -638,13 +674,16 @@ class Deployer:
             # p0 was a redundant vertex: it is left empty
             self.redundant.discard(job.spec.path[0])
 
-    def _placed_by(self, td: Step) -> str:
+    def _placed_by(self, td: Step, spec: JobSpec) -> str:
         """Why a finished test drive already placed the new robot, or "": it stopped at a
-        wall past wall_keep_rv ("wall"), or it drove clear all the way to d0 and
-        refine_deploy is off (a shorter drive goes on with the deploy and refine steps)."""
+        wall past wall_keep_rv ("wall"), or it drove clear all the way to the position the
+        planner chose (``spec.distance``) or to d0, and refine_deploy is off (a shorter
+        drive goes on with the deploy and refine steps)."""
         if td.reason == "wall":
             return "wall"
-        if not self.cfg.refine_deploy and self.params.d_td >= self.cfg.d0 - 1e-3 * self.cfg.rv:
+        if self.cfg.refine_deploy:
+            return ""
+        if spec.distance is not None or self.params.d_td >= self.cfg.d0 - 1e-3 * self.cfg.rv:
             return "placed by the test drive"
         return ""
 
@@ -683,7 +722,8 @@ class Deployer:
         lm, br = self._vertex_landmarks(f, exclude=set())
         return Task(kind="test_drive", vertex=f, landmarks=lm, bearings=br,
                     ref_offsets=self._chained_offsets(f, lm),
-                    direction=spec.direction, distance=self.params.d_td,
+                    direction=spec.direction,
+                    distance=td_length(spec, self.params),
                     keep_after=self.cfg.wall_keep_rv * self.cfg.rv,
                     timeout_s=self.cfg.task_timeout_s)
 
@@ -710,7 +750,8 @@ class Deployer:
             if v != f and v in occ and self._static(v) and self._live(occ[v]):
                 lm.append(occ[v])
                 br.append(b)
-        dist = self.cfg.d0 - (self.params.d_td if spec.test_drive else 0.0)
+        dist = ((self.cfg.d0 if spec.distance is None else spec.distance)
+                - (td_length(spec, self.params) if spec.test_drive else 0.0))
         task = Task(kind="deploy", vertex=spec.new_vertex, landmarks=lm, bearings=br,
                     direction=spec.direction, distance=max(0.0, dist),
                     timeout_s=self.cfg.task_timeout_s)
@@ -781,6 +822,27 @@ class Deployer:
                 return []
             out.append(got)
         return out
+
+    def _task_settle(self, job: PushJob, rid: int, v: int) -> Task | None:
+        """goto v on the robots holding v's neighbour vertices now (None if < 2), leaving
+        out the vertices other unfinished pushes are still moving."""
+        busy: set[int] = set()
+        for j in self.jobs:
+            if j is not job and not j.aborted and not j.finished:
+                busy.update(j.spec.path)
+                busy.add(j.spec.new_vertex)
+        holder = {u: r for r, u in self.vertex_of.items() if self._live(r)}
+        lm, br = [], []
+        for u, b in sorted(self.snapshot.nbrs.get(v, {}).items()):
+            r = holder.get(u)
+            if u in busy or r is None or r == rid:
+                continue
+            lm.append(r)
+            br.append(b)
+        if len(lm) < 2:
+            return None
+        return Task(kind="goto", vertex=v, landmarks=lm, bearings=br,
+                    ref_offsets=self._chained_offsets(v, lm), timeout_s=self.cfg.task_timeout_s)
 
     def _vertex_landmarks(self, v: int, exclude: set[int]) -> tuple[list[int], list[float]]:
         """Occupants of v's neighbour vertices (minus ``exclude``) and v's recorded bearings."""

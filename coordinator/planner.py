@@ -8,7 +8,10 @@ bearings of the new position (spec 4.4). No I/O, no positions.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
+
+import numpy as np
 
 from .params import TopologyParams
 
@@ -21,7 +24,8 @@ class Snapshot:
     occupant's body frame)}. contact: vertex -> sticky obstacle-contact bearing (rad, body
     frame). kinds: vertex -> robot kind. sources: source vertices present (vertex k is the
     vertex at base station k). source_dirs: heading (rad) of each base station, used as the
-    deployment direction of a lone first robot.
+    deployment direction of a lone first robot. known: (vertex a, vertex b, length in rv
+    units) for pairs whose distance the coordinator commanded (a clear test drive).
     """
     occupant: dict[int, int]
     nbrs: dict[int, dict[int, float]]
@@ -29,6 +33,7 @@ class Snapshot:
     kinds: dict[int, str] = field(default_factory=dict)
     sources: list[int] = field(default_factory=list)
     source_dirs: list[float] = field(default_factory=list)
+    known: list[tuple[int, int, float]] = field(default_factory=list)
 
 
 @dataclass
@@ -40,7 +45,9 @@ class JobSpec:
     (spec 4.4 assumed geometry), in f's occupant's frame.
     new_vertex: id for the new position. enter_source: base-station index whose new robot
     refills p0, or None when p0 is a redundant vertex (left empty). frontier_edge: the fence
-    edge deployed from (None for single file / a lone robot).
+    edge deployed from (None for single file / a lone robot). distance: how far the test
+    drive goes (rv units) when the planner chose the new position's distance, else None
+    (the configured d_td).
     """
     path: list[int]
     direction: float
@@ -51,6 +58,7 @@ class JobSpec:
     test_drive: bool = True
     scale_correct: bool = False
     frontier_edge: tuple[int, int] | None = None
+    distance: float | None = None  # test-drive length (same unit as rv); None: d_td
 
 
 @dataclass
@@ -85,8 +93,13 @@ def _reports(snap: Snapshot) -> dict[int, dict]:
 def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy: bool,
                test_drive_failures: dict[int, list[float]], previous_redundant: set,
                protected: set, max_paths: int, scale_correct: bool, test_drive: bool,
-               next_vertex: int) -> CyclePlan:
+               next_vertex: int, lattice_spacing: float | None = None) -> CyclePlan:
     """Decide one cycle. ``next_vertex``: the first unused vertex id (for new positions).
+
+    lattice_spacing: when set (rv units) and every robot is holonomic, each new position
+    is a point of one triangular lattice of that spacing through the source vertex (from
+    the swarm's shape estimated from bearings, coordinator.shape), so fronts growing from
+    different places mesh instead of colliding; else the spec's 60-deg rule at d_td.
 
     test_drive_failures: vertex -> bearings of test drives that touched a wall (sticky).
     previous_redundant: redundant vertices found earlier (used as path starts until the
@@ -158,4 +171,72 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
             new_vertex=vid, enter_source=enter, test_drive=test_drive,
             scale_correct=scale_correct, frontier_edge=dep.edge))
         vid += 1
+    if lattice_spacing and plan.jobs:
+        _place_on_lattice(snap, plan.jobs, float(lattice_spacing), params, test_drive_failures)
+        for job in plan.jobs:  # the assumed geometry of the position actually chosen
+            if job.distance is not None:
+                f = job.path[-1]
+                want = frontier_desired_bearings(snap.nbrs.get(f, {}), job.direction,
+                                                 d0=job.distance, rv=params.rv, old_vertex=f)
+                job.deploy_landmarks = list(want)
+                job.deploy_bearings = [want[v] for v in want]
     return plan
+
+
+def _place_on_lattice(snap: Snapshot, jobs: list[JobSpec], spacing: float,
+                      params: TopologyParams, failures: dict) -> None:
+    """Point each job's deployment at a free lattice point (sets direction and distance).
+
+    A candidate is within reach (1.02 x spacing, below rv) of the frontier robot f and of
+    the fence edge's other end, on the open side, at least half a spacing from f and 0.35
+    spacing from every robot and from this cycle's other targets, and outside the 90-deg
+    cone of any wall f has felt. Failing that, a free lattice point within reach of f
+    alone on the open side; failing that, the spec's direction at the lattice spacing.
+    Robots that rotate (their frames drift apart between cycles) keep the spec's rule.
+    """
+    from .angles import wrap
+    from .shape import Lattice, align_headings, estimate_shape, lattice_target
+
+    if not snap.sources or any(k != "holonomic" for k in snap.kinds.values()):
+        return
+    root = snap.sources[0]
+    head = align_headings(snap.nbrs, snap.kinds, root=root)
+    X = estimate_shape(snap.nbrs, head, snap.known, root=root, default_edge=spacing)
+    if root not in X:
+        return
+    axis = snap.source_dirs[0] if snap.source_dirs else 0.0
+    lat = Lattice(X[root], axis, spacing)
+    reach = min(1.02 * spacing, params.rv * (1.0 - 1e-3))
+    taken = [X[v] for v in X]
+    for job in jobs:
+        f = job.path[-1]
+        if f not in X:
+            continue
+        pf = X[f]
+        u = np.array([math.cos(job.direction + head.get(f, 0.0)),
+                      math.sin(job.direction + head.get(f, 0.0))])
+        walls = list(failures.get(f, ()))
+        if f in snap.contact:
+            walls.append(snap.contact[f])
+        walls = [w + head.get(f, 0.0) for w in walls]
+        o = None
+        if job.frontier_edge:
+            a, b = job.frontier_edge
+            o = b if a == f else a
+        po = X.get(o) if o is not None else None
+        near = [X[v] for v in X if np.hypot(*(X[v] - pf)) <= 2.5 * spacing]
+        local = lat.fitted(near) if len(near) >= 3 else lat
+        p = None
+        for need_o in ((True, False) if po is not None else (False,)):
+            p = lattice_target(local, pf, po if need_o else None, u, taken, reach=reach,
+                               min_sep=0.35 * spacing, min_dist=0.5 * spacing,
+                               blocked=walls, side_from=po)
+            if p is not None:
+                break
+        job.distance = spacing
+        if p is not None:
+            job.direction = wrap(math.atan2(p[1] - pf[1], p[0] - pf[0]) - head.get(f, 0.0))
+            job.distance = float(np.hypot(*(p - pf)))
+            taken.append(p)
+        else:
+            taken.append(pf + spacing * u)
