@@ -30,6 +30,7 @@ def td_length(spec: JobSpec, params) -> float:
     """How far a job's test drive goes: the planner's distance, else the configured d_td."""
     return params.d_td if spec.distance is None else spec.distance
 
+
 SETTLED_STATES = ("holding", "idle")
 
 
@@ -99,7 +100,7 @@ class Deployer:
         self.planner = planner
         self.robots: dict[int, Robot] = {}
         self.vertex_of: dict[int, int] = {}          # robot -> vertex
-        self.known: list[tuple[int, int, float]] = []  # (f, new vertex, drive length, rv units)
+        self.known: list[tuple[int, int, float]] = []  # (f, new vertex, clear drive length)
         self.contact: dict[int, float] = {}          # vertex -> sticky contact bearing
         self.td_failures: dict[int, list[float]] = {}  # vertex -> failed test-drive bearings
         self.redundant: set[int] = set()             # vertices
@@ -494,7 +495,8 @@ class Deployer:
         target has >= 2 static landmarks, else when the robot ahead arrived; a new robot
         enters p0 from the base; finally (refine_deploy, or a test drive shorter than d0)
         the deployed robot refines its position with every landmark, including the robot
-        now at f (and scale correction).
+        now at f (and scale correction); once every step is over, movers that homed on
+        fewer than two landmarks settle on all of them (``settle_moves``).
         """
         spec = job.spec
         path = spec.path

@@ -24,8 +24,8 @@ class Snapshot:
     occupant's body frame)}. contact: vertex -> sticky obstacle-contact bearing (rad, body
     frame). kinds: vertex -> robot kind. sources: source vertices present (vertex k is the
     vertex at base station k). source_dirs: heading (rad) of each base station, used as the
-    deployment direction of a lone first robot. known: (vertex a, vertex b, length in rv
-    units) for pairs whose distance the coordinator commanded (a clear test drive).
+    deployment direction of a lone first robot. known: (vertex a, vertex b, length, same unit
+    as rv) for pairs whose distance the coordinator commanded (a clear test drive).
     """
     occupant: dict[int, int]
     nbrs: dict[int, dict[int, float]]
