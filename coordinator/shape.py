@@ -6,11 +6,11 @@ commanded (a new robot's clear test drive of known length from its parent vertex
 scale. Nothing here uses positions from outside the swarm.
 
 * ``align_headings(nbrs, kinds)``: each occupant's body-frame heading relative to a root
-  (spec 4.7's mutual-bearing relation, averaged over a spanning-tree sweep); all zero when
-  every robot is holonomic (their frames are parallel).
-* ``estimate_shape(nbrs, headings, known)``: vertex positions in the root's frame (rv
-  units) by linear least squares on the bearing constraints n(beta_uv) . (x_v - x_u) = 0
-  and the known lengths b(beta_uv) . (x_v - x_u) = d.
+  (spec 4.7's mutual-bearing relation, least squares over every mutual edge); all zero
+  when every robot is holonomic (their frames are parallel).
+* ``estimate_shape(nbrs, headings, known)``: vertex positions in the root's frame (rv's
+  unit) by linear least squares on the bearing constraints n(beta_uv) . (x_v - x_u) = 0
+  with the mean edge pinned, scaled by the median ratio of known to estimated lengths.
 * ``lattice_target(...)``: the point of a triangular lattice of spacing d0 that a frontier
   robot should deploy to: beyond the fence edge, within reach of both its ends, not next
   to any robot already there.
@@ -131,14 +131,12 @@ def estimate_shape(nbrs: Mapping[int, Mapping[int, float]], headings: Mapping[in
     rows, cols, vals, rhs = [], [], [], []
     r = 0
 
-    def add(a: int, b: int, ux: float, uy: float, w: float, target: float) -> None:
-        nonlocal r
+    def add(row: int, a: int, b: int, ux: float, uy: float) -> None:
+        """Coefficients of (ux, uy) . (x_b - x_a) in ``row``."""
         ia, ib = col[a], col[b]
-        rows.extend((r, r, r, r))
+        rows.extend((row, row, row, row))
         cols.extend((2 * ib, 2 * ib + 1, 2 * ia, 2 * ia + 1))
-        vals.extend((w * ux, w * uy, -w * ux, -w * uy))
-        rhs.append(w * target)
-        r += 1
+        vals.extend((ux, uy, -ux, -uy))
 
     world = {}
     for a in order:
@@ -148,16 +146,13 @@ def estimate_shape(nbrs: Mapping[int, Mapping[int, float]], headings: Mapping[in
             if b in col and b != a:
                 beta = pa + th
                 world[(a, b)] = beta
-                add(a, b, -math.sin(beta), math.cos(beta), 1.0, 0.0)
-    # scale gauge: the mean of the edges' lengths along their bearings is 1
-    m = len(world)
-    w = 10.0 * math.sqrt(m)
+                add(r, a, b, -math.sin(beta), math.cos(beta))  # no sideways offset
+                rhs.append(0.0)
+                r += 1
+    # scale gauge, one row: the mean of the edges' lengths along their bearings is 1
+    w = 10.0 * math.sqrt(len(world))
     for (a, b), beta in world.items():
-        ia, ib = col[a], col[b]
-        c, s_ = math.cos(beta) * w / m, math.sin(beta) * w / m
-        rows.extend((r, r, r, r))
-        cols.extend((2 * ib, 2 * ib + 1, 2 * ia, 2 * ia + 1))
-        vals.extend((c, s_, -c, -s_))
+        add(r, a, b, math.cos(beta) * w / len(world), math.sin(beta) * w / len(world))
     rhs.append(w)
     r += 1
     # translation gauge: the root at the origin
