@@ -452,15 +452,66 @@ def _flow_witness(cx: Complex, z: np.ndarray, max_rounds: int = 100000) -> np.nd
     return r
 
 
+# ------------------------------------------------------------------- fence closure
+def _slack_edges(cx: Complex, fence):
+    """For a Fence whose one-sided edges z_raw had odd vertices: (z_raw mask, slack edge
+    ids), the slack being every edge outside z_raw with both ends within one hop of an odd
+    vertex. (None, None) for anything else."""
+    z_raw = getattr(fence, "z_raw", None)
+    if z_raw is None or not getattr(fence, "z_repair", np.zeros(0)).size:
+        return None, None
+    base = np.zeros(cx.n_edges, dtype=bool)
+    base[np.asarray(z_raw, dtype=_I64)] = True
+    odd = (np.bincount(cx.edges[base].ravel(), minlength=cx.n) & 1).astype(bool)
+    if not odd.any():
+        return None, None
+    u, v = cx.edges[:, 0], cx.edges[:, 1]
+    near = odd.copy()
+    near[v[odd[u]]] = True
+    near[u[odd[v]]] = True
+    return base, np.nonzero(near[u] & near[v] & ~base)[0]
+
+
+def _slack_closure(cx: Complex, phi: np.ndarray, n_crit: int, patterns: list[int],
+                   base: np.ndarray, slack: np.ndarray) -> np.ndarray | None:
+    """Slack edges f with base + f a boundary, or None.
+
+    Over GF(2), base + f is a boundary iff it is a cycle (f's odd vertices are base's) and
+    its forms phi lie in the span of the critical triangles' ``patterns``; both are linear
+    in f, so one elimination decides it: columns are the patterns (vertex part 0) and each
+    slack edge (its phi bits, then bits for its two vertices above bit n_crit).
+    """
+    cols = list(patterns)
+    k0 = len(cols)
+    su, sv = cx.edges[slack, 0], cx.edges[slack, 1]
+    for e, a, b in zip(slack.tolist(), su.tolist(), sv.tolist()):
+        cols.append(_to_int(phi[e]) | (1 << (n_crit + a)) | (1 << (n_crit + b)))
+    target = _to_int(np.bitwise_xor.reduce(phi[base], axis=0)) if base.any() else 0
+    odd = np.nonzero(np.bincount(cx.edges[base].ravel(), minlength=cx.n) & 1)[0]
+    for a in odd.tolist():
+        target ^= 1 << (n_crit + a)
+    subset, _ = _solve_patterns(cols, target)
+    if subset is None:
+        return None
+    return np.array(sorted(slack[i - k0] for i in subset if i >= k0), dtype=_I64)
+
+
 # ----------------------------------------------------------------------------- main
 def certify(cx: Complex, fence, *, seed: int | None = None) -> Certificate:
     """Find a 2-chain c with boundary(c) = z over GF(2), or an obstruction.
 
     fence: a Fence (its one-sided edges ``z`` are used), a bool edge mask, edge ids, or
     (k, 2) node-id pairs. seed: optional local vertex index to start the BFS from.
+
+    A Fence whose raw one-sided edges had odd vertices (crossing edges, e.g. around a
+    pillar) was closed into a cycle by a shortest T-join (``Fence.z_repair``). If that
+    closure is not a boundary, every other closure through edges within one hop of the
+    odd vertices is tried at once (one GF(2) elimination); the certificate's ``z`` is then
+    the closure found and ``stats["slack_closure"]`` its number of added edges.
     """
     E, T, n = cx.n_edges, cx.n_triangles, cx.n
     z = _as_edge_mask(cx, fence)
+    slack_base, slack = _slack_edges(cx, fence)
     z_ids = np.nonzero(z)[0]
     empty_e = np.zeros(0, dtype=_I64)
     stats: dict[str, Any] = {"edges": E, "triangles": T, "z": int(z_ids.size)}
@@ -541,6 +592,19 @@ def certify(cx: Complex, fence, *, seed: int | None = None) -> Certificate:
         if not np.array_equal(boundary_of(cx, chain), z):  # pragma: no cover - internal bug guard
             raise AssertionError("certificate solver produced a wrong chain")
         return _result(True, chain, empty_e, empty_e, empty_e)
+
+    # 4b. a fence repaired into a cycle (odd vertices where edges cross) may have been
+    # closed the wrong way round: search every closure near the odd vertices at once
+    if slack is not None and slack.size:
+        f = _slack_closure(cx, phi, crit.size, patterns, slack_base, slack)
+        if f is not None:
+            z2 = slack_base.copy()
+            z2[f] ^= True
+            cert2 = certify(cx, np.nonzero(z2)[0], seed=seed)
+            if cert2.certified:
+                stats.update(cert2.stats)
+                stats["slack_closure"] = int(f.size)
+                return certificate_from_chain(cx, cert2.z, cert2.chain, stats)
 
     # 5. obstruction: phi . y
     ybits = np.zeros(W, dtype=np.uint64)

@@ -2,12 +2,16 @@
 from __future__ import annotations
 
 import itertools
+import json
+from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from coordinator import boundary_of, build_complex, certify, detect_fence, is_cocycle, verify_certificate
+from coordinator import (TopologyParams, boundary_of, build_complex, certify, detect_fence, is_cocycle,
+                         verify_certificate)
 from test_topology_geom import boundary_edges_near, lattice, reports
 
 seeds = st.integers(min_value=0, max_value=2**32 - 1)
@@ -221,3 +225,53 @@ def test_empty_and_disconnected():
     f = detect_fence(cx)
     cert = certify(cx, f)
     assert cert.certified and verify_certificate(cx, cert) and cert.chain.size == cx.n_triangles
+
+
+def _pillar_hall_end():
+    """The last cycle of a pillar_hall run (seed 0): reports, failed test drives, truth."""
+    d = json.loads((Path(__file__).parent / "data" / "pillar_hall_end.json").read_text())
+    reps = {int(v): {"neighbours": {int(k): b for k, b in r["neighbours"].items()},
+                     "touch": r["touch"], "touch_bearing": r["touch_bearing"]}
+            for v, r in d["reports"].items()}
+    tdf = {int(k): v for k, v in d["test_drive_failures"].items()}
+    pos = {int(k): np.array(v) for k, v in d["positions"].items()}
+    return reps, tdf, pos
+
+
+def test_a_fence_closed_the_wrong_way_round_pillars_is_closed_by_the_slack_search():
+    reps, tdf, pos = _pillar_hall_end()
+    cx = build_complex(reps)
+    f = detect_fence(cx, TopologyParams(), test_drive_failures=tdf)
+    assert not f.frontier.size and f.z_repair.size  # done, but the raw fence had odd vertices
+    assert not certify(cx, f.z).certified           # the shortest closure is not a boundary
+    cert = certify(cx, f)
+    assert cert.certified and verify_certificate(cx, cert)
+    z, raw = set(cert.z.tolist()), set(f.z_raw.tolist())
+    assert raw <= z and len(z - raw) == cert.stats["slack_closure"]
+    # the closure runs around the pillars (0.3 m squares on a 2 m grid, rv = 1 m), where
+    # edges cross: every added edge within 1.5 m of one
+    pillars = np.array([(x, y) for x in (1.5, 3.5, 5.5, 7.5) for y in (1.5, 4.5)])
+    for a, b in cx.ids[cx.edges[sorted(z - raw)]].tolist():
+        mid = (pos[a] + pos[b]) / 2.0
+        assert np.min(np.linalg.norm(pillars - mid, axis=1)) < 1.5
+
+
+def test_the_slack_search_cannot_hide_a_hole_away_from_the_odd_vertices():
+    holes = [((3.0, 3.0), 0.9), ((7.5, 6.0), 1.1)]
+    P, cx = _holey(0, holes)
+    rims, outer = [], set(range(cx.n_edges))
+    for c, r in holes:
+        near, far = boundary_edges_near(cx, P, c, r + 1.2)
+        rims.append(set(near.tolist()))
+        outer &= set(far.tolist())
+    # a raw fence with a gap on the outer boundary, far from both holes: two odd vertices
+    far_e = max(outer, key=lambda e: np.linalg.norm(P[cx.edges[e]].mean(0) - (5.0, 5.0)))
+    for fenced in ([True, True], [True, False]):
+        raw = set(outer) - {far_e}
+        for rim, on in zip(rims, fenced):
+            raw |= rim if on else set()
+        closure = sorted(raw | {far_e})
+        fence = SimpleNamespace(z=np.array(closure), z_raw=np.array(sorted(raw)),
+                                z_repair=np.array([far_e]))
+        cert = certify(cx, fence)
+        assert cert.certified == all(fenced) and verify_certificate(cx, cert)
