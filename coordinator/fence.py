@@ -36,6 +36,11 @@ __all__ = ["Deployment", "FenceSide", "FenceEdge", "Fence", "detect_fence"]
 
 _I64 = np.int64
 _PI3 = math.pi / 3.0
+# A robot resting against a wall has no room within 90 deg of its contact. A failed test
+# drive says only that its own direction is blocked (the touch may be a door jamb to the
+# side): it blocks deployments within 30 deg of the direction driven. 90 deg cones around
+# the felt contact closed 0.9 m doors (corridor_doors certified at 77-84%).
+_FAILED_CONE = math.pi / 6.0
 
 
 @dataclass(frozen=True)
@@ -315,9 +320,9 @@ def detect_fence(
 ) -> Fence:
     """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
 
-    test_drive_failures: node id -> bearing, or list of bearings (rad, that robot's body
-      frame), of test drives that touched an obstacle (spec 3.4(iv)); its deployments
-      within 90 deg of a touch are dropped, and a fence side they served becomes an
+    test_drive_failures: node id -> direction, or list of directions (rad, that robot's
+      body frame), of test drives that touched an obstacle (spec 3.4(iv)); its deployments
+      within 30 deg of a failed direction are dropped, and a fence side they served becomes an
       obstacle side once the edge's other end has no room on it either (its own failed
       drive, or a wall contact within 90 deg of its deployment).
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
@@ -403,8 +408,9 @@ def detect_fence(
             if _sgn(wrap(ou - L.bearings(u)[v])) == sg and _sgn(wrap(ov - L.bearings(v)[u])) == -sg:
                 marks[(e, sg)] = "both_touch"
 
-    # ---- test-drive failures (spec 3.4(iv)): a wall felt at phi blocks every deployment
-    # direction within 90 deg of phi; the fence sides deploying into that cone become O
+    # ---- test-drive failures (spec 3.4(iv)): a drive along phi that touched blocks the
+    # deployments within _FAILED_CONE of phi; the fence sides deploying into it become O
+    # once both ends have no room
     failed: dict[int, list[float]] = {}
     if test_drive_failures:
         for nid, phis in test_drive_failures.items():
@@ -415,7 +421,7 @@ def detect_fence(
     blocked_cone = math.pi / 2.0
 
     def _blocked(p: int, d: float) -> bool:
-        return any(abs(wrap(d - phi)) < blocked_cone for phi in failed.get(p, ()))
+        return any(abs(wrap(d - phi)) < _FAILED_CONE for phi in failed.get(p, ()))
 
     def _no_room(p: int, d: float) -> bool:
         # p cannot deploy along d: a failed test drive's cone, or p rests against a wall

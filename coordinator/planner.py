@@ -190,7 +190,7 @@ def _place_on_lattice(snap: Snapshot, jobs: list[JobSpec], spacing: float,
     A candidate is within reach (1.02 x spacing, below rv) of the frontier robot f and of
     the fence edge's other end, on the open side, at least half a spacing from f and 0.35
     spacing from every robot and from this cycle's other targets, and outside the 90-deg
-    cone of any wall f has felt. Failing that, a free lattice point within reach of f
+    cone of f's wall contact and of each direction f's test drives failed in. Failing that, a free lattice point within reach of f
     alone on the open side; failing that, the spec's direction at the lattice spacing.
     Robots that rotate (their frames drift apart between cycles) keep the spec's rule.
     """

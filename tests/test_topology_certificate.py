@@ -242,7 +242,7 @@ def test_a_fence_closed_the_wrong_way_round_pillars_is_closed_by_the_slack_searc
     reps, tdf, pos = _pillar_hall_end()
     cx = build_complex(reps)
     f = detect_fence(cx, TopologyParams(), test_drive_failures=tdf)
-    assert not f.frontier.size and f.z_repair.size  # done, but the raw fence had odd vertices
+    assert f.z_repair.size  # the raw fence had odd vertices
     assert not certify(cx, f.z).certified           # the shortest closure is not a boundary
     cert = certify(cx, f)
     assert cert.certified and verify_certificate(cx, cert)

@@ -173,10 +173,10 @@ def test_test_drive_failure_reclassifies_the_touched_side_only():
     cx, f = _fence(P)
     dep = [d for d in f.deployments[0] if d.edge == (0, 1)][0]
     f1 = detect_fence(cx, test_drive_failures={0: dep.bearing})
-    # the wall felt below edge 0-1 blocks 0's deployments within 90 deg of the touch; edge
-    # 0-2 deploys at 120 deg (180 deg from the touch) and stays. One end's touch does not
+    # the drive below edge 0-1 failed: 0's deployments within 30 deg of it are dropped; edge
+    # 0-2 deploys at 120 deg (180 deg from the drive) and stays. One end's touch does not
     # close the side: robot 1 still deploys into it (a door jamb is not a wall)
-    assert all(abs(wrap(d.bearing - dep.bearing)) >= math.pi / 2 for d in f1.deployments[0])
+    assert all(abs(wrap(d.bearing - dep.bearing)) >= math.pi / 6 for d in f1.deployments[0])
     assert [d.edge for d in f1.deployments[0]] == [(0, 2)]
     assert _pairs(cx, f1.frontier) == {(0, 1), (0, 2), (1, 2)}
     assert (0, 1) in [d.edge for d in f1.deployments[1]]
@@ -204,6 +204,25 @@ def test_test_drive_failure_reclassifies_the_touched_side_only():
     # a forced obstacle edge (remembered from an earlier cycle) is an obstacle edge
     f3 = detect_fence(cx, forced_obstacle=[(1, 2)])
     assert _pairs(cx, f3.obstacle) == {(1, 2)}
+
+
+def test_drives_that_touched_the_door_jambs_do_not_close_the_door():
+    # two robots below a 0.9 m door, each beside one jamb (y = 0.2); each failed a drive up
+    # and out towards its jamb (for its other fence edge). The door side of their edge
+    # deploys 60 deg off the edge, 60 deg from those drives: it stays open (a 90 deg cone
+    # around each drive closed it)
+    s = 0.8
+    P = np.array([[0.0, 0.0], [s, 0.0], [s / 2, -s * math.sqrt(3) / 2]])
+    cx, f = _fence(P)
+    up = [(v, d) for v in (0, 1) for d in f.deployments[v] if d.edge == (0, 1)]
+    assert len(up) == 2 and all(d.bearing > 0 for _, d in up)  # both deploy up, into the door
+    jambs = {0: math.radians(120.0), 1: math.radians(60.0)}    # drives towards each jamb
+    f1 = detect_fence(cx, test_drive_failures=jambs)
+    assert (0, 1) in _pairs(cx, f1.frontier) and not f1.obstacle.size
+    assert all((0, 1) in [d.edge for d in f1.deployments[v]] for v in (0, 1))
+    # drives straight up the door side, from both ends, close it (a wall after all)
+    f2 = detect_fence(cx, test_drive_failures={v: d.bearing for v, d in up})
+    assert _pairs(cx, f2.obstacle) == {(0, 1)}
 
 
 def test_dangling_edge_deploys_at_60_degrees_and_single_file_as_fallback():
