@@ -453,47 +453,41 @@ def _flow_witness(cx: Complex, z: np.ndarray, max_rounds: int = 100000) -> np.nd
 
 
 # ------------------------------------------------------------------- fence closure
-def _slack_edges(cx: Complex, fence):
-    """For a Fence whose one-sided edges z_raw had odd vertices: (z_raw mask, slack edge
-    ids), the slack being every edge outside z_raw with both ends within one hop of an odd
-    vertex. (None, None) for anything else."""
-    z_raw = getattr(fence, "z_raw", None)
-    if z_raw is None or not getattr(fence, "z_repair", np.zeros(0)).size:
-        return None, None
+def _slack_closure(cx: Complex, fence, phi: np.ndarray, n_crit: int,
+                   patterns: list[int]) -> np.ndarray | None:
+    """Another closure of a Fence's raw one-sided edges z_raw that is a boundary: the edge
+    mask z_raw + f, f made of edges outside z_raw with both ends within one hop of an odd
+    vertex of z_raw; None if there is none (or z_raw had no odd vertex).
+
+    Over GF(2), z_raw + f is a boundary iff it is a cycle (f's odd vertices are z_raw's)
+    and its forms phi lie in the span of the critical triangles' ``patterns``; both are
+    linear in f, so one elimination decides it: columns are the patterns (vertex part 0)
+    and each slack edge (its phi bits, then bits for its two vertices above bit n_crit).
+    """
+    if getattr(fence, "z_raw", None) is None or not fence.z_repair.size:
+        return None
     base = np.zeros(cx.n_edges, dtype=bool)
-    base[np.asarray(z_raw, dtype=_I64)] = True
+    base[np.asarray(fence.z_raw, dtype=_I64)] = True
     odd = (np.bincount(cx.edges[base].ravel(), minlength=cx.n) & 1).astype(bool)
-    if not odd.any():
-        return None, None
     u, v = cx.edges[:, 0], cx.edges[:, 1]
     near = odd.copy()
     near[v[odd[u]]] = True
     near[u[odd[v]]] = True
-    return base, np.nonzero(near[u] & near[v] & ~base)[0]
-
-
-def _slack_closure(cx: Complex, phi: np.ndarray, n_crit: int, patterns: list[int],
-                   base: np.ndarray, slack: np.ndarray) -> np.ndarray | None:
-    """Slack edges f with base + f a boundary, or None.
-
-    Over GF(2), base + f is a boundary iff it is a cycle (f's odd vertices are base's) and
-    its forms phi lie in the span of the critical triangles' ``patterns``; both are linear
-    in f, so one elimination decides it: columns are the patterns (vertex part 0) and each
-    slack edge (its phi bits, then bits for its two vertices above bit n_crit).
-    """
+    slack = np.nonzero(near[u] & near[v] & ~base)[0]
+    if not slack.size:
+        return None
     cols = list(patterns)
     k0 = len(cols)
-    su, sv = cx.edges[slack, 0], cx.edges[slack, 1]
-    for e, a, b in zip(slack.tolist(), su.tolist(), sv.tolist()):
+    for e, a, b in zip(slack.tolist(), u[slack].tolist(), v[slack].tolist()):
         cols.append(_to_int(phi[e]) | (1 << (n_crit + a)) | (1 << (n_crit + b)))
     target = _to_int(np.bitwise_xor.reduce(phi[base], axis=0)) if base.any() else 0
-    odd = np.nonzero(np.bincount(cx.edges[base].ravel(), minlength=cx.n) & 1)[0]
-    for a in odd.tolist():
+    for a in np.nonzero(odd)[0].tolist():
         target ^= 1 << (n_crit + a)
     subset, _ = _solve_patterns(cols, target)
     if subset is None:
         return None
-    return np.array(sorted(slack[i - k0] for i in subset if i >= k0), dtype=_I64)
+    base[slack[[i - k0 for i in subset if i >= k0]]] ^= True
+    return base
 
 
 # ----------------------------------------------------------------------------- main
@@ -511,7 +505,6 @@ def certify(cx: Complex, fence, *, seed: int | None = None) -> Certificate:
     """
     E, T, n = cx.n_edges, cx.n_triangles, cx.n
     z = _as_edge_mask(cx, fence)
-    slack_base, slack = _slack_edges(cx, fence)
     z_ids = np.nonzero(z)[0]
     empty_e = np.zeros(0, dtype=_I64)
     stats: dict[str, Any] = {"edges": E, "triangles": T, "z": int(z_ids.size)}
@@ -595,16 +588,13 @@ def certify(cx: Complex, fence, *, seed: int | None = None) -> Certificate:
 
     # 4b. a fence repaired into a cycle (odd vertices where edges cross) may have been
     # closed the wrong way round: search every closure near the odd vertices at once
-    if slack is not None and slack.size:
-        f = _slack_closure(cx, phi, crit.size, patterns, slack_base, slack)
-        if f is not None:
-            z2 = slack_base.copy()
-            z2[f] ^= True
-            cert2 = certify(cx, np.nonzero(z2)[0], seed=seed)
-            if cert2.certified:
-                stats.update(cert2.stats)
-                stats["slack_closure"] = int(f.size)
-                return certificate_from_chain(cx, cert2.z, cert2.chain, stats)
+    z2 = _slack_closure(cx, fence, phi, crit.size, patterns)
+    if z2 is not None:
+        cert2 = certify(cx, z2, seed=seed)
+        if cert2.certified:
+            stats.update(cert2.stats)
+            stats["slack_closure"] = int(np.count_nonzero(z2)) - len(fence.z_raw)  # f is outside z_raw
+            return certificate_from_chain(cx, cert2.z, cert2.chain, stats)
 
     # 5. obstruction: phi . y
     ybits = np.zeros(W, dtype=np.uint64)

@@ -513,8 +513,9 @@ class Deployer:
             return
         # a secondary job at a shared source starts with the robot the previous one brought
         # in (or, when that job stopped before its robot left p0, with that robot). Starting
-        # its test drive and front movers before then cost robots (small map, seeds 0-3:
-        # 36.3 against 32.3), robots running while the source is refilled behind them.
+        # its test drive and front movers before then cost robots (small map, seeds 0-3,
+        # with the old 90-deg failure cones: 36.3 against 32.3), robots running while the
+        # source is refilled behind them.
         first = job.steps_at_source()
         if first is not None and first.robot < 0:
             rid = self._source_robot(job)

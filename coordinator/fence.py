@@ -41,6 +41,7 @@ _PI3 = math.pi / 3.0
 # side): it blocks deployments within 30 deg of the direction driven. 90 deg cones around
 # the felt contact closed 0.9 m doors (corridor_doors certified at 77-84%).
 _FAILED_CONE = math.pi / 6.0
+_CONTACT_CONE = math.pi / 2.0
 
 
 @dataclass(frozen=True)
@@ -418,8 +419,6 @@ def detect_fence(
                 continue
             p = cx.index_of(int(nid))
             failed[p] = [float(x) for x in (phis if isinstance(phis, (list, tuple)) else [phis])]
-    blocked_cone = math.pi / 2.0
-
     def _blocked(p: int, d: float) -> bool:
         return any(abs(wrap(d - phi)) < _FAILED_CONE for phi in failed.get(p, ()))
 
@@ -429,7 +428,7 @@ def detect_fence(
         if _blocked(p, d):
             return True
         c = contact(p)
-        return c is not None and abs(wrap(d - c)) < blocked_cone
+        return c is not None and abs(wrap(d - c)) < _CONTACT_CONE
 
     if failed:
         for e, recs in open_sides.items():

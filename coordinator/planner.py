@@ -101,7 +101,7 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     the swarm's shape estimated from bearings, coordinator.shape), so fronts growing from
     different places mesh instead of colliding; else the spec's 60-deg rule at d_td.
 
-    test_drive_failures: vertex -> bearings of test drives that touched a wall (sticky).
+    test_drive_failures: vertex -> directions of test drives that touched a wall (sticky).
     previous_redundant: redundant vertices found earlier (used as path starts until the
     next redundancy pass). protected: vertices that must not be counted redundant.
     """
@@ -190,8 +190,9 @@ def _place_on_lattice(snap: Snapshot, jobs: list[JobSpec], spacing: float,
     A candidate is within reach (1.02 x spacing, below rv) of the frontier robot f and of
     the fence edge's other end, on the open side, at least half a spacing from f and 0.35
     spacing from every robot and from this cycle's other targets, and outside the 90-deg
-    cone of f's wall contact and of each direction f's test drives failed in. Failing that, a free lattice point within reach of f
-    alone on the open side; failing that, the spec's direction at the lattice spacing.
+    cone of f's wall contact and of each direction f's test drives failed in. Failing
+    that, a free lattice point within reach of f alone on the open side; failing that, the
+    spec's direction at the lattice spacing.
     Robots that rotate (their frames drift apart between cycles) keep the spec's rule.
     """
     from .angles import wrap

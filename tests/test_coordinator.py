@@ -264,8 +264,11 @@ def test_lattice_placement_covers_the_room(tmp_path):
     res = sim.run(max_sim_s=3000, max_wall_s=200)
     assert res.certified, res.stop_reason
     assert _coverage(sim, res) >= 0.995
-    # the lattice chose the positions: most jobs carry the planner's own drive length
-    assert sum(j.distance is not None for j in jobs) > 0.8 * len(jobs)
+    # the lattice chose the positions: most jobs go to a free lattice point found, whose
+    # distance is its own (the fallbacks drive exactly d0; measured: 56 of 87 jobs)
+    d0 = sim.dep.cfg.d0
+    found = [j for j in jobs if j.distance is not None and abs(j.distance - d0) > 1e-9]
+    assert len(found) > 0.5 * len(jobs), (len(found), len(jobs))
 
 
 def _job(path, *, feed=None, occ=None, enter=True):
