@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     sup = Supervisor(rest, new_session=args.new_session)
     failed = False
     codes: dict[int, int] = {}
-    with Shutdown((signal.SIGINT, signal.SIGTERM, signal.SIGHUP)) as stop:
+    with Shutdown((signal.SIGINT, signal.SIGTERM, signal.SIGHUP), grace_s=0) as stop:  # supervisor
         try:
             for rid in range(args.first_id, args.first_id + args.n):
                 pid = sup.start(rid)

@@ -145,17 +145,50 @@ class Shutdown:
 
     Inside ``with Shutdown() as stop:`` the loop checks ``stop.is_set()`` or calls
     ``stop.wait(dt)``; the signal handlers are restored on exit.
+
+    Bounded exit: once stopping was requested (signal or parent gone), the process gets
+    ``grace_s`` seconds (env SWARMCOVER_EXIT_GRACE_S, default 15) to close its session and
+    return. If it is still alive then (a blocked put, a close that never returns), a
+    watchdog prints where the main thread is stuck to stderr and ends the process with
+    ``os._exit(0)``, so a stop request never leaves a process behind.
     """
 
-    def __init__(self, signals: Iterable[int] = (signal.SIGINT, signal.SIGTERM)):
+    def __init__(self, signals: Iterable[int] = (signal.SIGINT, signal.SIGTERM),
+                 grace_s: float | None = None):
         self.event = threading.Event()
         self.signum: int | None = None
         self._signals = tuple(signals)
         self._old: dict[int, Any] = {}
+        if grace_s is None:
+            grace_s = float(os.environ.get("SWARMCOVER_EXIT_GRACE_S", "15"))
+        self.grace_s = grace_s
+        self._watchdog: threading.Thread | None = None
 
     def _handle(self, signum, frame):
         self.signum = signum
         self.event.set()
+        self._arm()
+
+    def _arm(self) -> None:
+        """Start the exit watchdog (once)."""
+        if self._watchdog is not None or self.grace_s <= 0:
+            return
+        self._watchdog = threading.Thread(target=self._expire, daemon=True, name="exit-watchdog")
+        self._watchdog.start()
+
+    def _expire(self) -> None:
+        time.sleep(self.grace_s)
+        import sys
+        import traceback
+        main = sys._current_frames().get(threading.main_thread().ident)
+        where = "".join(traceback.format_stack(main)) if main is not None else "(unknown)\n"
+        try:
+            sys.stderr.write(f"swarmcover: still running {self.grace_s:g} s after the stop request "
+                             f"(signal {self.signum}); exiting now. Main thread was at:\n{where}")
+            sys.stderr.flush()
+            sys.stdout.flush()
+        finally:
+            os._exit(0)
 
     def __enter__(self) -> "Shutdown":
         if threading.current_thread() is threading.main_thread():
@@ -173,6 +206,7 @@ class Shutdown:
             if os.getppid() != ppid:
                 self.signum = signal.SIGHUP
                 self.event.set()
+                self._arm()
 
     def __exit__(self, *exc) -> None:
         for s, h in self._old.items():

@@ -428,7 +428,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     rec = None
     try:
-        with Shutdown() as stop:
+        with Shutdown(grace_s=0) as stop:  # never cut a recording short mid-flush
             try:
                 rec = Recorder(session, keyexpr, args.output, exclude=excludes,
                                metadata={"swarm": args.swarm})

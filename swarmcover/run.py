@@ -273,7 +273,7 @@ def main(argv: list[str] | None = None) -> int:
     t_wall0 = time.monotonic()
     state = dict(certified=False, reason="")
     rc = 1
-    with Shutdown() as stop:
+    with Shutdown(grace_s=0) as stop:  # a supervisor: stop_all bounds its own exit
         session = None
         try:
             if not args.router:

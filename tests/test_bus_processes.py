@@ -108,3 +108,31 @@ def test_router_sigterm_exits_zero(procs):
     r.wait_line("READY router")
     r.signal(signal.SIGTERM)
     assert r.wait(10) == 0
+
+
+STUCK_ON_STOP = """
+import sys, time
+sys.path.insert(0, {root!r})
+from bus.session import Shutdown
+with Shutdown(grace_s=1.0) as stop:
+    print("READY stuck", flush=True)
+    stop.wait()
+    time.sleep(600)  # stands for a close or a put that never returns
+"""
+
+
+def test_a_process_stuck_after_sigint_is_ended_by_the_watchdog_with_its_stack(procs, tmp_path):
+    import os
+    import sys
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    script = tmp_path / "stuck.py"
+    script.write_text(STUCK_ON_STOP.format(root=root))
+    p = procs.start([sys.executable, str(script)])
+    p.wait_line("READY stuck")
+    t0 = time.monotonic()
+    p.signal(signal.SIGINT)
+    assert p.wait(20) == 0
+    assert time.monotonic() - t0 < 10
+    out = p.output()
+    assert "still running 1 s after the stop request" in out
+    assert "time.sleep(600)" in out  # where the main thread was stuck
