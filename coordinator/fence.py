@@ -42,6 +42,12 @@ _PI3 = math.pi / 3.0
 # the felt contact closed 0.9 m doors (corridor_doors certified at 77-84%).
 _FAILED_CONE = math.pi / 6.0
 _CONTACT_CONE = math.pi / 2.0
+# Both-touch rule (spec 3.4 i): each contact must point clearly into the open side, at
+# least _TOUCH_MARGIN off the edge's line. Two robots across the mouth of a passage touch
+# its two sides: their contacts point along the edge, away from each other, and the spec's
+# sign test then closed the passage on bearing noise. (With the margin the two contacts
+# are also within 120 deg of each other: one wall, or two walls meeting at a corner.)
+_TOUCH_MARGIN = math.pi / 6.0
 
 
 @dataclass(frozen=True)
@@ -404,9 +410,13 @@ def detect_fence(
         ou, ov = contact(u), contact(v)
         if ou is None or ov is None:
             continue
+        au, av = wrap(ou - L.bearings(u)[v]), wrap(ov - L.bearings(v)[u])
+        if not (_TOUCH_MARGIN <= abs(au) <= math.pi - _TOUCH_MARGIN
+                and _TOUCH_MARGIN <= abs(av) <= math.pi - _TOUCH_MARGIN):
+            continue
         for rec in recs:
             sg = rec[0]
-            if _sgn(wrap(ou - L.bearings(u)[v])) == sg and _sgn(wrap(ov - L.bearings(v)[u])) == -sg:
+            if _sgn(au) == sg and _sgn(av) == -sg:
                 marks[(e, sg)] = "both_touch"
 
     # ---- test-drive failures (spec 3.4(iv)): a drive along phi that touched blocks the

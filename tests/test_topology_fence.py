@@ -115,6 +115,29 @@ def test_one_touch_or_touch_on_the_covered_side_stays_frontier():
     assert _pairs(cx, f.obstacle) == {(0, 1)}
 
 
+def test_both_touch_needs_contacts_clearly_on_the_open_side_not_along_the_edge():
+    # robots 0 and 1 across the mouth of a passage, each touching one side of it: the
+    # contacts point along the edge, away from each other, a little below it. The spec's
+    # sign test closed the passage; the contacts must be >= 30 deg off the edge's line.
+    P = np.array([[0.0, 0.0], [0.8, 0.0], [0.4, 0.6]])
+    rep = reports(P)
+    rep[0].update(touch=True, touch_bearing=-170 * DEG)
+    rep[1].update(touch=True, touch_bearing=-10 * DEG)
+    cx = build_complex(rep)
+    f = detect_fence(cx)
+    assert f.obstacle.size == 0 and int(cx.edge_index(0, 1)) in f.frontier.tolist()
+    # a corner: one robot on the bottom wall, the other on a wall meeting it at 45 deg
+    rep[0].update(touch_bearing=-90 * DEG)
+    rep[1].update(touch_bearing=-45 * DEG)
+    cx = build_complex(rep)
+    assert _pairs(cx, detect_fence(cx).obstacle) == {(0, 1)}
+    # 35 deg off the line still counts (a wall slanting away under the pair)
+    rep[0].update(touch_bearing=-145 * DEG)
+    rep[1].update(touch_bearing=-35 * DEG)
+    cx = build_complex(rep)
+    assert _pairs(cx, detect_fence(cx).obstacle) == {(0, 1)}
+
+
 def test_touch_towards_a_visible_robot_is_not_an_obstacle_contact():
     # 3 below 0 and 4 below 1 are seen by one robot each (no triangle below {0,1});
     # contacts pointing at them are robot contacts, not wall contacts
