@@ -195,8 +195,8 @@ def _room6x4(tmp_path) -> Path:
 @pytest.mark.timeout(240)
 def test_the_final_redundancy_pass_sends_its_robots_away(tmp_path):
     path = _room6x4(tmp_path)  # enough robots for redundancy to find some
-    # the spec's 60-deg rule (seed 3: 4 robots found redundant at the end)
-    sim = SimLoop(load_config(path), seed=3, coordinator_overrides={"lattice": False})
+    # the spec's 60-deg rule (seed 4: 4 robots found redundant at the end)
+    sim = SimLoop(load_config(path), seed=4, coordinator_overrides={"lattice": False})
     res = sim.run(max_sim_s=3000, max_wall_s=200)
     assert res.certified, res.stop_reason
     cx = res.final
@@ -218,7 +218,7 @@ def test_movers_on_one_landmark_settle_so_vertices_stay_put(tmp_path):
     cfg = load_config(_room6x4(tmp_path))
     p90 = {}
     for settle in (False, True):
-        sim = SimLoop(cfg, seed=3, coordinator_overrides={"settle_moves": settle,
+        sim = SimLoop(cfg, seed=4, coordinator_overrides={"settle_moves": settle,
                                                           "lattice": False})
         first: dict[int, tuple] = {}
         drift: list[float] = []
@@ -239,7 +239,7 @@ def test_movers_on_one_landmark_settle_so_vertices_stay_put(tmp_path):
         res = sim.run(max_sim_s=3000, max_wall_s=200)
         assert res.certified, res.stop_reason
         p90[settle] = float(np.percentile(drift, 90))
-    # measured (seed 3): 0.25 m without settling, 0.09 m with it
+    # measured (seed 4): 0.16 m without settling, 0.05 m with it
     assert p90[True] < 0.1 * cfg.rv, p90
     assert p90[True] < p90[False] / 2, p90
 
