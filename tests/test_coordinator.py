@@ -324,6 +324,34 @@ def test_a_push_whose_test_drive_touched_hands_its_source_robot_to_the_next_push
     assert src(b) is False
 
 
+def test_the_contact_a_failed_test_drive_reports_is_never_taken_for_a_wall_at_the_vertex():
+    """The agent comes back from a test drive that touched with the contact still reported
+    (pinned). The first status saying so used to be adopted as a resting contact before the
+    job heard of the failure, and its 90-deg cone then closed a door (corridor_doors)."""
+    from bus.messages import Task
+    from coordinator.deployer import Step
+
+    dep = Deployer(CoordinatorConfig(), sources=[0.0])
+    rid, v = 5, 12
+    dep.vertex_of[rid] = v
+    td = Step("test_drive", rid, v)
+    dep._start(td, Task(kind="test_drive", vertex=v, direction=1.8, distance=0.9), 0.0)
+    seq = iter(range(1, 100))
+
+    def status(task_id, task_state, bearing):
+        dep.on_status(Status(robot=rid, seq=next(seq), t=float(next(seq)), state="holding",
+                             vertex=v, task_id=task_id, task_state=task_state, reason="touch",
+                             contact=True, contact_bearing=bearing))
+
+    status(td.task_id, "failed", math.pi / 2)
+    assert v not in dep.contact
+    assert dep.td_contacts[v] == [pytest.approx(math.pi / 2)]
+    status(td.task_id + 1, "done", math.pi / 2)   # a later hold, contact still pinned
+    assert v not in dep.contact
+    status(td.task_id + 2, "done", -math.pi / 2)  # a wall the robot does rest against
+    assert dep.contact[v] == pytest.approx(-math.pi / 2)
+
+
 @pytest.mark.timeout(240)
 def test_one_touch_at_the_front_no_longer_cancels_the_other_pushes_from_the_source():
     cancelled = []
