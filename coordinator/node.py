@@ -190,6 +190,18 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
         for pub in list(task_pubs.values()) + [pub_complex, pub_spawn, pub_remove]:
             pub.undeclare()
         token.undeclare()
+        # what arrived but was not handled before the stop is still accounted for: invalid
+        # messages are counted, valid ones are too late to act on
+        for key, payload, _kind in mb.drain():
+            rel = keys.relative(key)
+            if rel.startswith("alive/robot/"):
+                continue
+            if rel == "world/clock":
+                rx.decode(key, payload, Clock)
+                continue
+            msg = rx.decode(key, payload, Status)
+            if msg is not None and keys.robot_id(key) != msg.robot:
+                rx.invalid[key] += 1
         if rx.invalid_total:
             log.warning("dropped %d invalid messages", rx.invalid_total)
     return rc
