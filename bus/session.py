@@ -17,8 +17,10 @@ import logging
 import os
 import queue
 import signal
+import sys
 import threading
 import time
+import traceback
 from collections import Counter
 from typing import Any, Iterable
 
@@ -178,8 +180,6 @@ class Shutdown:
 
     def _expire(self) -> None:
         time.sleep(self.grace_s)
-        import sys
-        import traceback
         main = sys._current_frames().get(threading.main_thread().ident)
         where = "".join(traceback.format_stack(main)) if main is not None else "(unknown)\n"
         try:
