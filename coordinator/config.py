@@ -34,9 +34,10 @@ class CoordinatorConfig:
     lattice: bool = True           # new positions on one triangular lattice of spacing d0
                                    # through the source, from the swarm's bearing-only shape
                                    # estimate (holonomic swarms; README "departures"); off:
-                                   # the spec's 60-deg rule. open_room seeds 0-2: 148.7 ->
-                                   # 135.3 robots, 80 -> 71.7 cycles (measured before the
-                                   # both-touch margin in coordinator/fence.py)
+                                   # the spec's 60-deg rule. Seeds 0-2, robots / cycles,
+                                   # 60-deg rule -> lattice: open_room 152.7 / 80.7 ->
+                                   # 129.7 / 76.7, pillar_hall 137.7 / 86.7 -> 134.0 / 78.7,
+                                   # office_ros 104.0 / 139.7 -> 106.7 / 117.7
     refine_deploy: bool = False    # re-home a new robot on the assumed geometry of spec 4.4
                                    # (equilateral on its parent edge, then scale correction)
                                    # after a clear test drive. Off: it stays where the drive
