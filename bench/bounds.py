@@ -36,19 +36,29 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from world.config import load_config  # noqa: E402
+from world.groundtruth import ideal_count  # noqa: E402
 from world.maps import build_map  # noqa: E402
 
 TRI = math.sqrt(3) / 2
 
 
+def _ring_lengths(wm) -> list[float]:
+    """Length (m) of the boundary ring and of each obstacle ring."""
+    out = []
+    for ring in [wm.boundary] + list(wm.obstacles):
+        ring = np.asarray(ring, float)
+        out.append(float(np.sum(np.linalg.norm(np.roll(ring, -1, axis=0) - ring, axis=1))))
+    return out
+
+
+def _ideal(wm, d: float) -> int:
+    """summary.json's baseline: the tessellation count of spacing d (area formula, rounded)."""
+    return int(round(ideal_count(wm, d)["area_formula"]))
+
+
 def euler_bound(wm, rv: float) -> dict:
     """Lower bound on the robots of a swarm whose Rips triangles tile the free area."""
-    rings = [wm.boundary] + list(wm.obstacles)
-    b = 0
-    for ring in rings:
-        ring = np.asarray(ring, float)
-        length = float(np.sum(np.linalg.norm(np.roll(ring, -1, axis=0) - ring, axis=1)))
-        b += max(3, math.ceil(length / rv - 1e-9))
+    b = sum(max(3, math.ceil(length / rv - 1e-9)) for length in _ring_lengths(wm))
     h = len(wm.obstacles)
     triangles = wm.free_area / (TRI / 2 * rv * rv)
     return dict(robots=math.ceil((triangles + b + 2 - 2 * h) / 2), boundary_vertices=b,
@@ -57,11 +67,7 @@ def euler_bound(wm, rv: float) -> dict:
 
 def wall_length(wm) -> float:
     """Total length (m) of the boundary and obstacle rings."""
-    total = 0.0
-    for ring in [wm.boundary] + list(wm.obstacles):
-        ring = np.asarray(ring, float)
-        total += float(np.sum(np.linalg.norm(np.roll(ring, -1, axis=0) - ring, axis=1)))
-    return total
+    return sum(_ring_lengths(wm))
 
 
 def equilateral_same(wm, s: float) -> float:
@@ -104,7 +110,7 @@ def _edges(P: np.ndarray, rv: float) -> np.ndarray:
     return np.linalg.norm(P[E[:, 0]] - P[E[:, 1]], axis=1)
 
 
-def lattices(rect, radius: float, rv: float, area: float, max_spacing: float) -> dict:
+def lattices(wm, rect, radius: float, rv: float, max_spacing: float) -> dict:
     """Oracle lattices over nominal spacings s in [rv/2, max_spacing] and both orientations:
     ``fewest`` robots (ties: the lower ratio_same_spacing) and ``lowest_same`` (the lowest
     ratio_same_spacing). Mean edge: over every pair within rv, as in ``summary.json``
@@ -119,7 +125,7 @@ def lattices(rect, radius: float, rv: float, area: float, max_spacing: float) ->
             # points dx <= s apart): Rips triangles that tile the rectangle
             L = _edges(P, rv)
             mean = float(L.mean())
-            same = area / (TRI * mean * mean)
+            same = _ideal(wm, mean)
             cand = dict(robots=len(P), spacing=float(s), flipped=flip, mean_edge=mean,
                         max_edge=float(L.max()), ratio_same_spacing=len(P) / same)
             if fewest is None or (cand["robots"], cand["ratio_same_spacing"]) < (
@@ -147,7 +153,7 @@ def main(argv=None) -> int:
         cfg = load_config(path)
         wm = build_map(cfg)
         rv = cfg.rv
-        ideal = round(wm.free_area / (TRI * rv * rv))
+        ideal = _ideal(wm, rv)
         eb = euler_bound(wm, rv)
         row = dict(name=cfg.name, free_area=wm.free_area, ideal_count=ideal,
                    euler_bound=eb["robots"], euler_ratio=eb["robots"] / ideal,
@@ -159,7 +165,7 @@ def main(argv=None) -> int:
         cells = [f"{eb['robots']:4d} ({eb['robots'] / ideal:4.2f})"]
         if rect:
             for key, cap in (("lattice_rv", rv), ("lattice_d0", 0.9 * rv)):
-                lat = lattices(rect, cfg.robots.radius, rv, wm.free_area, cap)
+                lat = lattices(wm, rect, cfg.robots.radius, rv, cap)
                 row[key] = dict(lat["fewest"], ratio=lat["fewest"]["robots"] / ideal)
                 row["lowest_ratio_same_spacing"] = lat["lowest_same"]
                 cells.append(f"{lat['fewest']['robots']:4d} ({row[key]['ratio']:4.2f})")
