@@ -103,7 +103,6 @@ class Deployer:
         self.known: list[tuple[int, int, float]] = []  # (f, new vertex, clear drive length)
         self.contact: dict[int, float] = {}          # vertex -> sticky contact bearing
         self.td_contacts: dict[int, list[float]] = {}  # vertex -> contacts of failed drives
-        self.td_task_ids: set[int] = set()             # task ids of test drives sent
         self.td_failures: dict[int, list[float]] = {}  # vertex -> failed test-drive directions
         self.redundant: set[int] = set()             # vertices
         self.left: set[int] = set()                  # robots sent away (redundant, idle)
@@ -154,7 +153,7 @@ class Deployer:
             self.next_task = max(self.next_task, (st.task_id % 1_000_000) + 1)
         v = self.vertex_of.get(st.robot)
         if (v is not None and st.contact and st.task_state == "failed"
-                and st.task_id in self.td_task_ids):
+                and self._is_test_drive(st.robot, st.task_id)):
             # back from a test drive that touched: its contact is the drive's (the agent
             # pins it), felt out there, not a wall at the vertex. Recorded here, on the
             # first status that reports the failure: the job hears of it only later, and
@@ -170,6 +169,12 @@ class Deployer:
                             for c in self.td_contacts.get(v, ()))):
             self.contact[v] = st.contact_bearing
         self._track_tasks(r)
+
+    def _is_test_drive(self, rid: int, task_id: int) -> bool:
+        """Whether ``task_id`` is the test drive of a push in flight (it still is when the
+        status reporting its failure arrives: that status is what ends the step)."""
+        return any(s.name == "test_drive" and s.robot == rid and s.task_id == task_id
+                   for j in self.jobs for s in j.steps)
 
     def on_alive(self, rid: int, present: bool, now: float) -> None:
         r = self.robots.get(rid)
@@ -685,8 +690,6 @@ class Deployer:
         if task.kind in ("goto", "hold"):
             s.n_landmarks = len(task.landmarks)
         s.task_id = self._send(s.robot, task, now)
-        if task.kind == "test_drive":
-            self.td_task_ids.add(s.task_id)
         s.state = "running"
         s.started_t = now
 
@@ -738,14 +741,11 @@ class Deployer:
     def _test_drive_failed(self, job: PushJob, td: Step) -> None:
         spec = job.spec
         if td.reason.startswith("touch"):
-            st = self.robots[td.robot].status
-            bearing = st.contact_bearing if st is not None and st.contact else spec.direction
             # the direction driven is what failed: the fence blocks deployments near it. The
-            # contact bearing was felt where the robot touched, up to wall_keep_rv out, not
-            # at the vertex (a door jamb felt "above" is ahead and to the side), so it is
-            # kept apart and never taken for a wall the robot at the vertex rests against
+            # contact was felt where the robot touched, up to wall_keep_rv out, not at the
+            # vertex (a door jamb felt "above" is ahead and to the side): on_status keeps it
+            # in td_contacts, never as a wall the robot at the vertex rests against
             self.td_failures.setdefault(spec.path[-1], []).append(float(spec.direction))
-            self.td_contacts.setdefault(spec.path[-1], []).append(bearing)
             log.info("cycle %d: test drive from vertex %d touched an obstacle: fence side "
                      "of %s -> O", self.cycle, spec.path[-1], spec.frontier_edge)
         self._cancel(job, "test drive touched an obstacle")

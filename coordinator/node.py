@@ -127,6 +127,18 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
     log.info("coordinator up: swarm %s, rv %.2f, %d source(s), push_mode %s", keys.swarm,
              ccfg.rv, len(headings), ccfg.push_mode)
     rc = 0
+
+    def decode(key: str, rel: str, payload: bytes):
+        """A clock or status sample (``rel``: its key relative to the swarm) -> its message,
+        or None (invalid: counted by rx)."""
+        if rel == "world/clock":
+            return rx.decode(key, payload, Clock)
+        msg = rx.decode(key, payload, Status)
+        if msg is not None and keys.robot_id(key) != msg.robot:
+            rx.invalid[key] += 1
+            return None
+        return msg
+
     try:
         while not stop.is_set():
             item = mb.get(0.05)
@@ -138,19 +150,12 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
                     if rid is not None:
                         dep.on_alive(rid, kind == zenoh.SampleKind.PUT, now)
                     continue
-                if rel == "world/clock":
-                    msg = rx.decode(key, payload, Clock)
-                    if msg is not None:
-                        now = max(now, msg.t)
-                    continue
-                msg = rx.decode(key, payload, Status)
+                msg = decode(key, rel, payload)
                 if msg is None:
                     continue
-                if keys.robot_id(key) != msg.robot:
-                    rx.invalid[key] += 1
-                    continue
                 now = max(now, msg.t)
-                dep.on_status(msg)
+                if isinstance(msg, Status):
+                    dep.on_status(msg)
             if not clocked:
                 clocked = any(keys.relative(k) == "world/clock" for k, _, _ in items)
                 if not clocked:
@@ -194,14 +199,8 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
         # messages are counted, valid ones are too late to act on
         for key, payload, _kind in mb.drain():
             rel = keys.relative(key)
-            if rel.startswith("alive/robot/"):
-                continue
-            if rel == "world/clock":
-                rx.decode(key, payload, Clock)
-                continue
-            msg = rx.decode(key, payload, Status)
-            if msg is not None and keys.robot_id(key) != msg.robot:
-                rx.invalid[key] += 1
+            if not rel.startswith("alive/robot/"):
+                decode(key, rel, payload)
         if rx.invalid_total:
             log.warning("dropped %d invalid messages", rx.invalid_total)
     return rc

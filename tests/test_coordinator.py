@@ -329,12 +329,13 @@ def test_the_contact_a_failed_test_drive_reports_is_never_taken_for_a_wall_at_th
     (pinned). The first status saying so used to be adopted as a resting contact before the
     job heard of the failure, and its 90-deg cone then closed a door (corridor_doors)."""
     from bus.messages import Task
-    from coordinator.deployer import Step
 
     dep = Deployer(CoordinatorConfig(), sources=[0.0])
     rid, v = 5, 12
     dep.vertex_of[rid] = v
-    td = Step("test_drive", rid, v)
+    job = _job([v], occ={v: rid})
+    dep.jobs.append(job)
+    td = job.step("test_drive")
     dep._start(td, Task(kind="test_drive", vertex=v, direction=1.8, distance=0.9), 0.0)
     seq = iter(range(1, 100))
 
