@@ -50,6 +50,9 @@ class CoordinatorConfig:
     push_mode: str = "parallel"    # "parallel": movers along a path go at once where >= 2 static
                                    # landmarks exist; "sequential": strictly from the front
     max_paths: int = 8             # pushes per cycle (vertex-disjoint paths)
+    td_retries: int = 2            # a push whose test drive touched is re-planned within its
+                                   # cycle up to this many times (spec 3.4(iv)); 0: it waits
+                                   # for the next cycle
     robots_max: int = 400          # stop (not certified) if more would be needed
     task_timeout_s: float = 40.0   # per task, simulated seconds
     spawn_timeout_s: float = 60.0  # new agent must report within this (sim s)
@@ -73,6 +76,8 @@ class CoordinatorConfig:
             raise ValueError(f"[coordinator] eps_rv = {self.eps_rv!r}: must be in [0, 1)")
         if self.max_paths < 1 or self.robots_max < 1:
             raise ValueError("[coordinator] max_paths and robots_max must be >= 1")
+        if self.td_retries < 0:
+            raise ValueError(f"[coordinator] td_retries = {self.td_retries!r}: must be >= 0")
 
     @property
     def d0(self) -> float:

@@ -21,7 +21,7 @@ from bus.messages import Complex, Remove, Spawn, Status, Task
 
 from .angles import wrap
 from .config import CoordinatorConfig
-from .planner import CyclePlan, JobSpec, Snapshot, plan_cycle
+from .planner import CyclePlan, JobSpec, Snapshot, plan_cycle, replan_push
 
 log = logging.getLogger("swarmcover.coordinator")
 
@@ -67,6 +67,7 @@ class PushJob:
     steps: list[Step] = field(default_factory=list)
     aborted: bool = False
     feed: "PushJob | None" = None   # earlier job at the same source: its new robot moves here
+    retries: int = 0                # times its test drive touched and it was re-planned
 
     def steps_at_source(self) -> "Step | None":
         """The step that moves the robot away from p0 (deploy when the path is just p0)."""
@@ -119,6 +120,7 @@ class Deployer:
         self.cycle_end_t = 0.0
         self.failures = 0
         self.failures_healed = 0
+        self.td_retries = 0                          # pushes re-planned within their cycle
         self._pending_failures = 0
         self.done = False
         self.certified = False
@@ -556,7 +558,7 @@ class Deployer:
                 return
             if td.state == "failed":
                 if not job.aborted:
-                    self._test_drive_failed(job, td)
+                    self._test_drive_failed(job, td, now)
                 return
             placed = self._placed_by(td, spec)
             if placed and dep.state == "pending":
@@ -738,7 +740,7 @@ class Deployer:
             return "placed by the test drive"
         return ""
 
-    def _test_drive_failed(self, job: PushJob, td: Step) -> None:
+    def _test_drive_failed(self, job: PushJob, td: Step, now: float) -> None:
         spec = job.spec
         if td.reason.startswith("touch"):
             # the direction driven is what failed: the fence blocks deployments near it. The
@@ -748,7 +750,42 @@ class Deployer:
             self.td_failures.setdefault(spec.path[-1], []).append(float(spec.direction))
             log.info("cycle %d: test drive from vertex %d touched an obstacle: fence side "
                      "of %s -> O", self.cycle, spec.path[-1], spec.frontier_edge)
+            if td.reason == "touch" and self._retry(job):
+                return
         self._cancel(job, "test drive touched an obstacle")
+
+    def _retry(self, job: PushJob) -> bool:
+        """Re-plan a push whose test drive touched, within this cycle (spec 3.4(iv): the
+        next-best frontier). Nothing of it has moved: the drive came back to f before
+        reporting. The new push starts where the old one did (a source feeds its pushes in
+        order), avoids this cycle's other pushes and every robot no longer where the
+        snapshot has it. False when retries are used up or nothing is left to push to."""
+        if job.retries >= self.cfg.td_retries:
+            return False
+        snap = self.snapshot
+        busy = [j.spec for j in self.jobs if j is not job and (not j.aborted or any(
+            s.state not in ("pending", "cancelled") for s in j.steps if s.name != "test_drive"))]
+        gone = {v for v, rid in snap.occupant.items()
+                if not self._live(rid) or rid in self.left or self.vertex_of.get(rid) != v}
+        spec = replan_push(
+            snap, self.params, start=job.spec.path[0], busy=busy, exclude=gone,
+            test_drive_failures={v: b for v, b in self.td_failures.items() if v in snap.occupant},
+            new_vertex=self.next_vertex, scale_correct=job.spec.scale_correct,
+            test_drive=True, lattice_spacing=self.cfg.d0 if self.cfg.lattice else None)
+        if spec is None:
+            return False
+        self.next_vertex += 1
+        fresh = self._make_job(spec)
+        log.info("cycle %d: push re-planned after the touch: %s -> %s", self.cycle,
+                 job.spec.path, spec.path)
+        job.spec, job.steps = spec, fresh.steps
+        job.retries += 1
+        self.td_retries += 1
+        if job.feed is not None:
+            first = job.steps_at_source()
+            if first is not None:
+                first.robot = -1             # resolved again from the feed (_source_robot)
+        return True
 
     # ------------------------------------------------------------------ tasks
     def _ref_offsets(self, recorder_vertex: int, landmark_vertices: list[int]) -> list[float]:
@@ -1010,4 +1047,5 @@ class Deployer:
                     robots_spawned=len(self.robots), robots_alive=len(alive),
                     robots_in_complex=len(self._members()), robots_left=len(self.left),
                     failures=self.failures, failures_healed=self.failures_healed,
+                    test_drive_retries=self.td_retries,
                     stop_reason=self.stop_reason)

@@ -90,6 +90,16 @@ def _reports(snap: Snapshot) -> dict[int, dict]:
     return out
 
 
+def _complex_and_fence(snap: Snapshot, params: TopologyParams, failures: dict):
+    """The Rips complex of the snapshot and its fence (spec 2-3)."""
+    from .complex import build_complex
+    from .fence import detect_fence
+
+    cx = build_complex(_reports(snap))
+    lone_dir = snap.source_dirs[0] if snap.source_dirs else 0.0
+    return cx, detect_fence(cx, params, test_drive_failures=failures, default_bearing=lone_dir)
+
+
 def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy: bool,
                test_drive_failures: dict[int, list[float]], previous_redundant: set,
                protected: set, max_paths: int, scale_correct: bool, test_drive: bool,
@@ -106,16 +116,10 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     next redundancy pass). protected: vertices that must not be counted redundant.
     """
     from .certificate import certify
-    from .complex import build_complex
-    from .fence import detect_fence
     from .paths import plan_pushes
     from .redundancy import find_redundant
-    from .targets import frontier_desired_bearings
 
-    cx = build_complex(_reports(snap))
-    lone_dir = snap.source_dirs[0] if snap.source_dirs else 0.0
-    fence = detect_fence(cx, params, test_drive_failures=test_drive_failures,
-                         default_bearing=lone_dir)
+    cx, fence = _complex_and_fence(snap, params, test_drive_failures)
     cert = certify(cx, fence)
     ids = cx.ids
     edges = [tuple(int(x) for x in ids[e]) for e in cx.edges]
@@ -158,33 +162,68 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
 
     vid = next_vertex
     for pth in chosen:
-        dep = pth.deployment
-        f = pth.frontier
-        nb = snap.nbrs.get(f, {})
-        want = frontier_desired_bearings(nb, dep.bearing, d0=params.d0, rv=params.rv,
-                                         old_vertex=f)
-        start = pth.vertices[0]
-        enter = snap.sources.index(start) if start in snap.sources else None
-        plan.jobs.append(JobSpec(
-            path=list(pth.vertices), direction=float(dep.bearing),
-            deploy_landmarks=list(want), deploy_bearings=[want[v] for v in want],
-            new_vertex=vid, enter_source=enter, test_drive=test_drive,
-            scale_correct=scale_correct, frontier_edge=dep.edge))
+        plan.jobs.append(_job_spec(snap, params, pth, vid, test_drive, scale_correct))
         vid += 1
     if lattice_spacing and plan.jobs:
         _place_on_lattice(snap, plan.jobs, float(lattice_spacing), params, test_drive_failures)
-        for job in plan.jobs:  # the assumed geometry of the position actually chosen
-            if job.distance is not None:
-                f = job.path[-1]
-                want = frontier_desired_bearings(snap.nbrs.get(f, {}), job.direction,
-                                                 d0=job.distance, rv=params.rv, old_vertex=f)
-                job.deploy_landmarks = list(want)
-                job.deploy_bearings = [want[v] for v in want]
     return plan
 
 
+def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: list[JobSpec],
+                exclude: set[int], test_drive_failures: dict[int, list[float]],
+                new_vertex: int, scale_correct: bool, test_drive: bool,
+                lattice_spacing: float | None = None) -> JobSpec | None:
+    """The next-best push from ``start`` within this cycle, after a test drive touched
+    (spec 3.4(iv): "choose the next-best frontier"), or None.
+
+    The fence is recomputed on the same snapshot with ``test_drive_failures`` (which now
+    hold the failed direction, so that side is obstacle and its deployments are gone).
+    busy: the other pushes of this cycle; their paths, and every neighbour of their
+    frontier vertices, are not used (their occupants are moving or about to), and a lattice
+    position keeps clear of their targets. exclude: further vertices no path may use.
+    """
+    from .paths import plan_pushes
+
+    cx, fence = _complex_and_fence(snap, params, test_drive_failures)
+    if start not in cx:
+        return None
+    used = set(exclude)
+    for job in busy:
+        used.update(job.path)
+        f = job.path[-1]
+        if f in cx:
+            used.update(int(x) for x in cx.neighbours(f))
+    used.discard(start)
+    found = plan_pushes(cx, fence, [start], (), params=params, max_paths=1, exclude=used)
+    if not found or found[0].frontier in used:
+        return None
+    spec = _job_spec(snap, params, found[0], new_vertex, test_drive, scale_correct)
+    if lattice_spacing:
+        _place_on_lattice(snap, [spec], float(lattice_spacing), params, test_drive_failures,
+                          fixed=busy)
+    return spec
+
+
+def _job_spec(snap: Snapshot, params: TopologyParams, pth, vid: int, test_drive: bool,
+              scale_correct: bool) -> JobSpec:
+    """The push along ``pth`` (a paths.PushPath) deploying to new vertex ``vid``."""
+    from .targets import frontier_desired_bearings
+
+    dep = pth.deployment
+    f = pth.frontier
+    want = frontier_desired_bearings(snap.nbrs.get(f, {}), dep.bearing, d0=params.d0,
+                                     rv=params.rv, old_vertex=f)
+    start = pth.vertices[0]
+    enter = snap.sources.index(start) if start in snap.sources else None
+    return JobSpec(path=list(pth.vertices), direction=float(dep.bearing),
+                   deploy_landmarks=list(want), deploy_bearings=[want[v] for v in want],
+                   new_vertex=vid, enter_source=enter, test_drive=test_drive,
+                   scale_correct=scale_correct, frontier_edge=dep.edge)
+
+
 def _place_on_lattice(snap: Snapshot, jobs: list[JobSpec], spacing: float,
-                      params: TopologyParams, failures: dict) -> None:
+                      params: TopologyParams, failures: dict,
+                      fixed: list[JobSpec] = ()) -> None:
     """Point each job's deployment at a free lattice point (sets direction and distance).
 
     A candidate is within reach (1.02 x spacing, below rv) of the frontier robot f and of
@@ -194,9 +233,12 @@ def _place_on_lattice(snap: Snapshot, jobs: list[JobSpec], spacing: float,
     that, a free lattice point within reach of f alone on the open side; failing that, the
     spec's direction at the lattice spacing.
     Robots that rotate (their frames drift apart between cycles) keep the spec's rule.
+    fixed: pushes already under way this cycle; their targets count as taken.
+    Each placed job's deploy bearings are re-derived for the distance chosen.
     """
     from .angles import wrap
     from .shape import Lattice, align_headings, estimate_shape, lattice_target
+    from .targets import frontier_desired_bearings
 
     if not snap.sources or any(k != "holonomic" for k in snap.kinds.values()):
         return
@@ -209,6 +251,12 @@ def _place_on_lattice(snap: Snapshot, jobs: list[JobSpec], spacing: float,
     lat = Lattice(X[root], axis, spacing)
     reach = min(1.02 * spacing, params.rv * (1.0 - 1e-3))
     taken = [X[v] for v in X]
+    for job in fixed:
+        f = job.path[-1]
+        if f in X:
+            a = job.direction + head.get(f, 0.0)
+            d = params.d_td if job.distance is None else job.distance
+            taken.append(X[f] + d * np.array([math.cos(a), math.sin(a)]))
     for job in jobs:
         f = job.path[-1]
         if f not in X:
@@ -241,3 +289,7 @@ def _place_on_lattice(snap: Snapshot, jobs: list[JobSpec], spacing: float,
             taken.append(p)
         else:
             taken.append(pf + spacing * u)
+        want = frontier_desired_bearings(snap.nbrs.get(f, {}), job.direction,
+                                         d0=job.distance, rv=params.rv, old_vertex=f)
+        job.deploy_landmarks = list(want)
+        job.deploy_bearings = [want[v] for v in want]

@@ -245,30 +245,39 @@ def test_movers_on_one_landmark_settle_so_vertices_stay_put(tmp_path):
 
 
 @pytest.mark.timeout(240)
-def test_lattice_placement_covers_the_room(tmp_path):
+def test_lattice_placement_covers_the_room(tmp_path, monkeypatch):
     """[coordinator] lattice = true: new robots go to free points of one lattice through the
     source (from the bearing-only shape estimate). On the 6 m x 4 m room it certifies full
     coverage. (It no longer uses fewer robots than the spec's 60-deg rule there: seeds 1-6,
     47.7 against 46.7, since failed test drives block only their own direction.)"""
+    import coordinator.deployer as deployer
+
     cfg = load_config(_room6x4(tmp_path))
     sim = SimLoop(cfg, seed=1, coordinator_overrides={"lattice": True})
     jobs = []
-    orig = sim.dep.planner
+    orig, orig_retry = sim.dep.planner, deployer.replan_push
 
     def planner(snap, params, **kw):
         plan = orig(snap, params, **kw)
         jobs.extend(plan.jobs)
         return plan
 
+    def retry(*a, **kw):
+        spec = orig_retry(*a, **kw)
+        jobs.extend([spec] if spec else [])
+        return spec
+
     sim.dep.planner = planner
+    monkeypatch.setattr(deployer, "replan_push", retry)
     res = sim.run(max_sim_s=3000, max_wall_s=200)
     assert res.certified, res.stop_reason
     assert _coverage(sim, res) >= 0.995
-    # the lattice chose the positions: most jobs go to a free lattice point found, whose
-    # distance is its own (the fallbacks drive exactly d0; measured: 56 of 87 jobs)
+    # the lattice chose the positions: about half the pushes, retries included, go to a
+    # free lattice point found, whose distance is its own (the fallbacks drive exactly d0;
+    # measured: 59 of 117; 64 of 116 without retries)
     d0 = sim.dep.cfg.d0
     found = [j for j in jobs if j.distance is not None and abs(j.distance - d0) > 1e-9]
-    assert len(found) > 0.5 * len(jobs), (len(found), len(jobs))
+    assert len(found) > 0.4 * len(jobs), (len(found), len(jobs))
 
 
 def _job(path, *, feed=None, occ=None, enter=True):
@@ -371,3 +380,20 @@ def test_one_touch_at_the_front_no_longer_cancels_the_other_pushes_from_the_sour
     # before, 23 of 61 cancelled pushes here were "source feed failed" (52 cycles, 33 robots)
     assert "source feed failed" not in cancelled
     assert res.cycles < 45
+
+
+@pytest.mark.timeout(240)
+def test_a_push_whose_test_drive_touched_is_replanned_within_its_cycle():
+    """Spec 3.4(iv): on a touch, the next-best frontier at once. Before, the push was
+    cancelled and its robot waited for the next cycle (small map, seed 0: 35 robots in 37
+    cycles; with the retry 33 in 22)."""
+    cfg = load_config("configs/small.toml")
+    out = {}
+    for retries in (0, 2):
+        sim = SimLoop(cfg, seed=0, coordinator_overrides={"td_retries": retries})
+        res = sim.run(max_sim_s=4000, max_wall_s=200)
+        assert res.certified, res.stop_reason
+        assert _coverage(sim, res) >= 0.995
+        out[retries] = (res.cycles, res.deployer.td_retries)
+    assert out[0][1] == 0 and out[2][1] > 0, out
+    assert out[2][0] < 0.8 * out[0][0], out

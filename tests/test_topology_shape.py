@@ -200,3 +200,47 @@ def test_without_a_lattice_the_planner_keeps_the_spec_rule():
                       scale_correct=False, test_drive=True, next_vertex=100,
                       lattice_spacing=0.95)
     assert plan.jobs and all(j.distance is None for j in plan.jobs)
+
+
+def _target(P, job):
+    f = job.path[-1]
+    return P[f] + job.distance * np.array([math.cos(job.direction), math.sin(job.direction)])
+
+
+def test_a_push_whose_test_drive_touched_is_replanned_to_the_next_best_frontier():
+    """Spec 3.4(iv): after a touch, the next-best frontier at once (same source), never the
+    direction that failed, never through this cycle's other pushes or onto their targets."""
+    from coordinator.params import TopologyParams
+    from coordinator.planner import JobSpec, plan_cycle, replan_push
+    spacing = 0.95
+    snap, P = _lattice_snapshot(spacing)
+    params = TopologyParams()
+    kw = dict(new_vertex=200, scale_correct=False, test_drive=True, lattice_spacing=spacing)
+    plan = plan_cycle(snap, params, cycle=1, redundancy=False, test_drive_failures={},
+                      previous_redundant=set(), protected=set(), max_paths=8,
+                      scale_correct=False, test_drive=True, next_vertex=100,
+                      lattice_spacing=spacing)
+    (first,) = plan.jobs
+    failed = {first.path[-1]: [first.direction]}
+    again = replan_push(snap, params, start=first.path[0], busy=[], exclude=set(),
+                        test_drive_failures=failed, **kw)
+    assert again is not None and again.path[0] == first.path[0] and again.new_vertex == 200
+    assert np.linalg.norm(_target(P, again) - _target(P, first)) > 0.5 * spacing
+    # another push of this cycle aims at that point from vertex 4 (path 5 -> 4): the retry
+    # keeps off its path, the neighbours of its frontier vertex, and its target
+    d = _target(P, again) - P[4]
+    busy = [JobSpec(path=[5, 4], direction=math.atan2(d[1], d[0]), deploy_landmarks=[],
+                    deploy_bearings=[], new_vertex=150, enter_source=None,
+                    distance=float(np.hypot(*d)))]
+    third = replan_push(snap, params, start=first.path[0], busy=busy, exclude=set(),
+                        test_drive_failures=failed, **kw)
+    assert third is not None
+    off_limits = {5, 4} | {v for v in snap.nbrs[4]}
+    assert not (set(third.path) - {first.path[0]}) & off_limits
+    assert np.linalg.norm(_target(P, third) - _target(P, busy[0])) > 0.35 * spacing
+    assert np.linalg.norm(_target(P, third) - _target(P, first)) > 0.5 * spacing
+    # nothing left to push to from the start: no retry
+    assert replan_push(snap, params, start=first.path[0], busy=busy,
+                       exclude=set(P) - {first.path[0]},
+                       test_drive_failures={first.path[0]: [k * math.pi / 3 for k in range(6)]},
+                       **kw) is None
