@@ -48,6 +48,13 @@ _CONTACT_CONE = math.pi / 2.0
 # sign test then closed the passage on bearing noise. (With the margin the two contacts
 # are also within 120 deg of each other: one wall, or two walls meeting at a corner.)
 _TOUCH_MARGIN = math.pi / 6.0
+# A reflex open side (its wedge at an end wider than _REFLEX: the end sits where the front
+# turns, at the mouth of a passage) gets a second probe _DEEP off the edge once the 60-deg
+# drive touched; the side is closed only when that one touches too. A 0.5 m passage above a
+# box (structured, seed 1) was closed when the 60-deg drives from both ends of its mouth hit
+# the box, with the passage itself, straight ahead of one end, never driven into.
+_REFLEX = 7.0 * math.pi / 6.0
+_DEEP = 2.0 * math.pi / 3.0
 
 
 @dataclass(frozen=True)
@@ -432,6 +439,27 @@ def detect_fence(
     def _blocked(p: int, d: float) -> bool:
         return any(abs(wrap(d - phi)) < _FAILED_CONE for phi in failed.get(p, ()))
 
+    def _deep(p: int, q: int, off):
+        """The second probe of p on the side of edge p-q deploying at ``off``, or None. A
+        robot in no triangle (single file) has the straight-ahead fallback instead."""
+        if off is None or abs(off) < _PI3 - 1e-9 or n_tri_at[p] == 0:
+            return None
+        sg = 1 if off > 0 else -1
+        bp = L.bearings(p)
+        t0 = bp[q]
+        wedge = min(((sg * (t - t0)) % (2.0 * math.pi) for l, t in bp.items() if l != q),
+                    default=2.0 * math.pi)
+        return wrap(t0 + sg * _DEEP) if wedge > _REFLEX else None
+
+    def _side_closed(p: int, q: int, off) -> bool:
+        """p has no room on this side: its 60-deg direction, and a reflex side's deep probe."""
+        if off is None:
+            return True
+        if not _no_room(p, wrap(L.bearings(p)[q] + off)):
+            return False
+        deep = _deep(p, q, off)
+        return deep is None or _no_room(p, deep)
+
     def _no_room(p: int, d: float) -> bool:
         # p cannot deploy along d: a failed test drive's cone, or p rests against a wall
         # facing that way (its sticky contact)
@@ -445,14 +473,11 @@ def detect_fence(
             u, v = int(cx.edges[e, 0]), int(cx.edges[e, 1])
             if u not in failed and v not in failed:
                 continue
-            Bu, Bv = L.bearings(u), L.bearings(v)
             for sg, off_u, off_v in recs:
                 # both ends must have no room: one touch (a door jamb, a pillar) says
                 # nothing about the other end's deployment, which goes on (a single end's
                 # failure closing the side left whole rooms behind doors uncovered)
-                nu = off_u is None or _no_room(u, wrap(Bu[v] + off_u))
-                nv = off_v is None or _no_room(v, wrap(Bv[u] + off_v))
-                if nu and nv:
+                if _side_closed(u, v, off_u) and _side_closed(v, u, off_v):
                     marks[(e, sg)] = "test_drive"
 
     for pair in forced_obstacle:
@@ -483,9 +508,14 @@ def detect_fence(
             dv = wrap(Bv[u] + off_v)
             sides.append(FenceSide(sg, "frontier", "open", du, dv, off_u, off_v))
             edge_ids = (int(ids[u]), int(ids[v]))
-            for p, d, off in ((u, du, off_u), (v, dv, off_v)):
+            for p, q, d, off in ((u, v, du, off_u), (v, u, dv, off_v)):
                 deps.setdefault(p, []).append(
                     Deployment(int(ids[p]), d, edge_ids, sg, off, L.clearance(p, d), "edge"))
+                deep = _deep(p, q, off) if _blocked(p, d) else None
+                if deep is not None:
+                    deps[p].append(Deployment(int(ids[p]), deep, edge_ids, sg,
+                                              wrap(deep - L.bearings(p)[q]),
+                                              L.clearance(p, deep), "edge"))
         fe = FenceEdge(int(ids[u]), int(ids[v]), e, tuple(sides))
         fence_edges.append(fe)
         if fe.is_frontier:

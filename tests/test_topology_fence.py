@@ -194,34 +194,52 @@ def test_test_drive_failure_reclassifies_the_touched_side_only():
     s = 0.9
     P = np.array([[0.0, 0.0], [s, 0.0], [s / 2, s * math.sqrt(3) / 2]])
     cx, f = _fence(P)
-    dep = [d for d in f.deployments[0] if d.edge == (0, 1)][0]
+
+    def probes(f_any, p, edge):
+        return [d for d in f_any.deployments.get(p, ()) if d.edge == edge]
+
+    dep = probes(f, 0, (0, 1))[0]
     f1 = detect_fence(cx, test_drive_failures={0: dep.bearing})
     # the drive below edge 0-1 failed: 0's deployments within 30 deg of it are dropped; edge
     # 0-2 deploys at 120 deg (180 deg from the drive) and stays. One end's touch does not
     # close the side: robot 1 still deploys into it (a door jamb is not a wall)
     assert all(abs(wrap(d.bearing - dep.bearing)) >= math.pi / 6 for d in f1.deployments[0])
-    assert [d.edge for d in f1.deployments[0]] == [(0, 2)]
+    assert (0, 2) in [d.edge for d in f1.deployments[0]]
     assert _pairs(cx, f1.frontier) == {(0, 1), (0, 2), (1, 2)}
     assert (0, 1) in [d.edge for d in f1.deployments[1]]
-    # robot 1's test drive into that side touched too: now the side is O
-    dep1 = [d for d in f.deployments[1] if d.edge == (0, 1)][0]
+    # a lone triangle's corners are reflex (300 deg open): after the 60-deg drive, 0 probes
+    # the side again 120 deg off the edge, before the side can close
+    (deep0,) = probes(f1, 0, (0, 1))
+    assert abs(wrap(deep0.bearing - cx.bearing(0, 1))) == pytest.approx(2 * math.pi / 3)
+    # robot 1's test drive into that side touched too: 60-deg drives alone no longer close
+    # a reflex side; once both deep probes touched as well, the side is O
+    dep1 = probes(f, 1, (0, 1))[0]
     f2 = detect_fence(cx, test_drive_failures={0: dep.bearing, 1: [dep1.bearing]})
+    assert not _pairs(cx, f2.obstacle)
+    (deep1,) = probes(f2, 1, (0, 1))
+    f2 = detect_fence(cx, test_drive_failures={0: [dep.bearing, deep0.bearing],
+                                               1: [dep1.bearing, deep1.bearing]})
     assert _pairs(cx, f2.obstacle) == {(0, 1)}
     assert _pairs(cx, f2.frontier) == {(0, 2), (1, 2)}
     assert {f2.by_index[e].sides[0].reason for e in f2.obstacle} == {"test_drive"}
-    # or robot 1 rests against a wall on that side (its contact counts as no room)
+    # or robot 1 rests against a wall on that side (its contact counts as no room for both
+    # of its probes)
     cx_t = build_complex({
         0: {"neighbours": {1: cx.bearing(0, 1), 2: cx.bearing(0, 2)}},
         1: {"neighbours": {0: cx.bearing(1, 0), 2: cx.bearing(1, 2)}, "touch": True,
             "touch_bearing": -math.pi / 2},
         2: {"neighbours": {0: cx.bearing(2, 0), 1: cx.bearing(2, 1)}}})
-    f5 = detect_fence(cx_t, test_drive_failures={0: dep.bearing})
+    f5 = detect_fence(cx_t, test_drive_failures={0: [dep.bearing, deep0.bearing]})
     assert _pairs(cx_t, f5.obstacle) == {(0, 1)}
-    # failures toward both of 0's deployments, and 2's toward 0-2: that side closes too
-    dep2 = f2.deployments[0][0]
-    dep20 = [d for d in f.deployments[2] if d.edge == (0, 2)][0]
-    f4 = detect_fence(cx, test_drive_failures={0: [dep.bearing, dep2.bearing],
-                                               1: [dep1.bearing], 2: [dep20.bearing]})
+    # failures toward all of 0's probes, and 2's toward 0-2: that side closes too
+    fails = {0: [dep.bearing, deep0.bearing], 1: [dep1.bearing, deep1.bearing]}
+    dep02, dep20 = probes(f, 0, (0, 2))[0], probes(f, 2, (0, 2))[0]
+    fails[0].append(dep02.bearing)
+    fails[2] = [dep20.bearing]
+    f4 = detect_fence(cx, test_drive_failures=fails)
+    fails[0] += [d.bearing for d in probes(f4, 0, (0, 2))]
+    fails[2] += [d.bearing for d in probes(f4, 2, (0, 2))]
+    f4 = detect_fence(cx, test_drive_failures=fails)
     assert _pairs(cx, f4.obstacle) == {(0, 1), (0, 2)}
     assert 0 not in f4.deployments
     # a forced obstacle edge (remembered from an earlier cycle) is an obstacle edge
@@ -243,8 +261,14 @@ def test_drives_that_touched_the_door_jambs_do_not_close_the_door():
     f1 = detect_fence(cx, test_drive_failures=jambs)
     assert (0, 1) in _pairs(cx, f1.frontier) and not f1.obstacle.size
     assert all((0, 1) in [d.edge for d in f1.deployments[v]] for v in (0, 1))
-    # drives straight up the door side, from both ends, close it (a wall after all)
-    f2 = detect_fence(cx, test_drive_failures={v: d.bearing for v, d in up})
+    # drives up the door side from both ends, and their second probes (the corners of a
+    # lone triangle are reflex), close it (a wall after all)
+    fails = {v: [d.bearing] for v, d in up}
+    f2 = detect_fence(cx, test_drive_failures=fails)
+    assert not f2.obstacle.size
+    for v in (0, 1):
+        fails[v] += [d.bearing for d in f2.deployments[v] if d.edge == (0, 1)]
+    f2 = detect_fence(cx, test_drive_failures=fails)
     assert _pairs(cx, f2.obstacle) == {(0, 1)}
 
 
@@ -357,3 +381,36 @@ def test_isolated_robots_use_their_own_default_direction():
     cx = build_complex(reports(P))
     f = detect_fence(cx, default_bearing={1: 2.0})
     assert f.deployments[0][0].bearing == 0.0 and f.deployments[1][0].bearing == 2.0
+
+
+def test_a_reflex_end_probes_a_second_direction_before_its_side_closes():
+    """A 0.5 m passage opened beside the robot at the corner of the front (structured, seed
+    1): both 60-deg drives into the side hit the box next to the mouth and closed it, while
+    straight ahead of the corner lay the passage. An end whose open wedge is reflex (> 210
+    deg) probes again 120 deg off the edge; along a straight front (180 deg) it does not."""
+    s = 0.9
+    h = s * math.sqrt(3) / 2
+    # two rows: 0 1 2 3 at y = 0, 4 5 6 at y = h (a lattice patch; 0 is an acute corner)
+    P = np.array([[i * s, 0.0] for i in range(4)] + [[s / 2 + i * s, h] for i in range(3)])
+    cx, f = _fence(P)
+
+    def below(f_any, p, edge):
+        return [d for d in f_any.deployments.get(p, ()) if d.edge == edge
+                and math.sin(d.bearing) < 0]
+
+    # an edge of the straight bottom row (1-2): the 60-deg drives from both ends close it
+    fails = {1: [below(f, 1, (1, 2))[0].bearing], 2: [below(f, 2, (1, 2))[0].bearing]}
+    g = detect_fence(cx, test_drive_failures=fails)
+    assert (1, 2) in _pairs(cx, g.obstacle)
+    assert not below(g, 1, (1, 2)) and not below(g, 2, (1, 2))
+    # the corner's edge (0-1): 0's wedge below is 300 deg; after both 60-deg drives touched
+    # the side stays open and 0 probes 120 deg off the edge (down and to the left)
+    fails = {0: [below(f, 0, (0, 1))[0].bearing], 1: [below(f, 1, (0, 1))[0].bearing]}
+    g = detect_fence(cx, test_drive_failures=fails)
+    assert (0, 1) in _pairs(cx, g.frontier)
+    (deep,) = below(g, 0, (0, 1))
+    assert wrap(deep.bearing) == pytest.approx(-2 * math.pi / 3)
+    assert not below(g, 1, (0, 1))          # 1's wedge is straight: no second probe
+    fails[0].append(deep.bearing)
+    g = detect_fence(cx, test_drive_failures=fails)
+    assert (0, 1) in _pairs(cx, g.obstacle)
