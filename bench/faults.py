@@ -560,9 +560,16 @@ def fuzz_processes(procs_start, zargs: list[str], report: Path) -> dict:
     }
 
 
-def send_fuzz(session, targets, per_topic: int, seed: int = 0, progress=None) -> dict:
+def send_fuzz(session, targets, per_topic: int, seed: int = 0, progress=None,
+              rate_hz: float | None = None) -> dict:
     """Put ``per_topic`` invalid payloads on every target key (BLOCK: none is dropped on the
-    way). Returns {key: count}."""
+    way). Returns {key: count}.
+
+    rate_hz: at most this many puts per second (None: as fast as possible). BLOCK does not
+    wait forever: a router whose queue to a subscriber stays full for 5 s (Zenoh's default
+    ``congestion_control.block.wait_before_close``) closes that link, and what was queued
+    on it is lost; a process starved of CPU while it decodes a flood can fall that far
+    behind on a loaded 2-core machine."""
     import zenoh
     rng = random.Random(seed)
     sent = {}
@@ -578,8 +585,13 @@ def send_fuzz(session, targets, per_topic: int, seed: int = 0, progress=None) ->
                 except (CdrError, ValueError, Exception):
                     ok.append(p)
             payloads = ok or [b""]
+        t0 = time.monotonic()
         for i in range(per_topic):
             pub.put(payloads[i % len(payloads)])
+            if rate_hz and i % 100 == 99:
+                ahead = (i + 1) / rate_hz - (time.monotonic() - t0)
+                if ahead > 0:
+                    time.sleep(ahead)
         pub.undeclare()
         sent[key] = per_topic
         if progress:
