@@ -558,7 +558,7 @@ class Deployer:
                 return
             if td.state == "failed":
                 if not job.aborted:
-                    self._test_drive_failed(job, td, now)
+                    self._test_drive_failed(job, td)
                 return
             placed = self._placed_by(td, spec)
             if placed and dep.state == "pending":
@@ -740,7 +740,7 @@ class Deployer:
             return "placed by the test drive"
         return ""
 
-    def _test_drive_failed(self, job: PushJob, td: Step, now: float) -> None:
+    def _test_drive_failed(self, job: PushJob, td: Step) -> None:
         spec = job.spec
         if td.reason.startswith("touch"):
             # the direction driven is what failed: the fence blocks deployments near it. The

@@ -338,7 +338,9 @@ def detect_fence(
       body frame), of test drives that touched an obstacle (spec 3.4(iv)); its deployments
       within 30 deg of a failed direction are dropped, and a fence side they served becomes an
       obstacle side once the edge's other end has no room on it either (its own failed
-      drive, or a wall contact within 90 deg of its deployment).
+      drive, or a wall contact within 90 deg of its deployment). An end whose open wedge
+      on that side is reflex (> 210 deg) has no room only once a second probe, 120 deg off
+      the edge and offered as a deployment after the first touched, failed too.
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
       e.g. edges reclassified after a failed test drive in an earlier cycle.
     default_bearing: deployment direction (rad, body frame) of a robot with no

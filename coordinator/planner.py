@@ -176,8 +176,9 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
     """The next-best push from ``start`` within this cycle, after a test drive touched
     (spec 3.4(iv): "choose the next-best frontier"), or None.
 
-    The fence is recomputed on the same snapshot with ``test_drive_failures`` (which now
-    hold the failed direction, so that side is obstacle and its deployments are gone).
+    The fence is recomputed on the same snapshot with ``test_drive_failures``, which now
+    hold the failed direction: deployments within 30 deg of it are gone, and its side
+    closes once both ends have no room (coordinator.fence).
     busy: the other pushes of this cycle; their paths, and every neighbour of their
     frontier vertices, are not used (their occupants are moving or about to), and a lattice
     position keeps clear of their targets. exclude: further vertices no path may use.
