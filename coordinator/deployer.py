@@ -34,6 +34,12 @@ def td_length(spec: JobSpec, params) -> float:
 SETTLED_STATES = ("holding", "idle")
 
 
+def _near_any(bearing: float, bearings, tol: float = 0.02) -> bool:
+    """Whether ``bearing`` is within ``tol`` rad of one of ``bearings`` (a contact seen
+    again: the agent keeps reporting a pinned contact)."""
+    return any(abs(wrap(bearing - b)) < tol for b in bearings)
+
+
 @dataclass
 class Robot:
     rid: int
@@ -120,7 +126,7 @@ class Deployer:
         self.cycle_end_t = 0.0
         self.failures = 0
         self.failures_healed = 0
-        self.td_retries = 0                          # pushes re-planned within their cycle
+        self.retried = 0                             # pushes re-planned within their cycle
         self._pending_failures = 0
         self.done = False
         self.certified = False
@@ -163,12 +169,11 @@ class Deployer:
             # eps_rv = 0.05: 46 of 53 adopted contacts were test-drive contacts, and a
             # door was closed by one, certified at 81% coverage)
             tdc = self.td_contacts.setdefault(v, [])
-            if not any(abs(wrap(st.contact_bearing - c)) < 0.02 for c in tdc):
+            if not _near_any(st.contact_bearing, tdc):
                 tdc.append(st.contact_bearing)
         if (v is not None and st.contact and st.state == "holding"
                 and st.vertex == v and st.task_state != "running"
-                and not any(abs(wrap(st.contact_bearing - c)) < 0.02
-                            for c in self.td_contacts.get(v, ()))):
+                and not _near_any(st.contact_bearing, self.td_contacts.get(v, ()))):
             self.contact[v] = st.contact_bearing
         self._track_tasks(r)
 
@@ -780,7 +785,7 @@ class Deployer:
                  job.spec.path, spec.path)
         job.spec, job.steps = spec, fresh.steps
         job.retries += 1
-        self.td_retries += 1
+        self.retried += 1
         if job.feed is not None:
             first = job.steps_at_source()
             if first is not None:
@@ -1047,5 +1052,5 @@ class Deployer:
                     robots_spawned=len(self.robots), robots_alive=len(alive),
                     robots_in_complex=len(self._members()), robots_left=len(self.left),
                     failures=self.failures, failures_healed=self.failures_healed,
-                    test_drive_retries=self.td_retries,
+                    test_drive_retries=self.retried,
                     stop_reason=self.stop_reason)

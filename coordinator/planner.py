@@ -145,10 +145,7 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
                         max_paths=max_paths)
     chosen = list(paths)
     while len(chosen) < max_paths and snap.sources:
-        used = set()
-        for pth in chosen:
-            used.update(pth.vertices)
-            used.update(int(x) for x in cx.neighbours(pth.frontier))
+        used = _claimed(cx, [pth.vertices for pth in chosen])
         extra = None
         for s in snap.sources:
             cand = plan_pushes(cx, fence, [s], (), params=params, max_paths=1,
@@ -188,12 +185,7 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
     cx, fence = _complex_and_fence(snap, params, test_drive_failures)
     if start not in cx:
         return None
-    used = set(exclude)
-    for job in busy:
-        used.update(job.path)
-        f = job.path[-1]
-        if f in cx:
-            used.update(int(x) for x in cx.neighbours(f))
+    used = set(exclude) | _claimed(cx, [job.path for job in busy])
     used.discard(start)
     found = plan_pushes(cx, fence, [start], (), params=params, max_paths=1, exclude=used)
     if not found or found[0].frontier in used:
@@ -203,6 +195,17 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
         _place_on_lattice(snap, [spec], float(lattice_spacing), params, test_drive_failures,
                           fixed=busy)
     return spec
+
+
+def _claimed(cx, paths) -> set[int]:
+    """Vertices a cycle's pushes take: their paths, and every neighbour of their frontier
+    vertices (the landmarks and surroundings of the new position)."""
+    used: set[int] = set()
+    for path in paths:
+        used.update(int(v) for v in path)
+        if path[-1] in cx:
+            used.update(int(x) for x in cx.neighbours(path[-1]))
+    return used
 
 
 def _job_spec(snap: Snapshot, params: TopologyParams, pth, vid: int, test_drive: bool,

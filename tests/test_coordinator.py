@@ -397,6 +397,6 @@ def test_a_push_whose_test_drive_touched_is_replanned_within_its_cycle():
         res = sim.run(max_sim_s=4000, max_wall_s=200)
         assert res.certified, res.stop_reason
         assert _coverage(sim, res) >= 0.995
-        out[retries] = (res.cycles, res.deployer.td_retries)
+        out[retries] = (res.cycles, res.deployer.retried)
     assert out[0][1] == 0 and out[2][1] > 0, out
     assert out[2][0] < 0.8 * out[0][0], out
