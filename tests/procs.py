@@ -27,6 +27,9 @@ class Proc:
         self.argv = argv
         e = dict(os.environ)
         e.setdefault("PYTHONUNBUFFERED", "1")
+        # the exit watchdog (bus.session.Shutdown) must fire inside the tests' 15 s waits,
+        # not at them: a fake-robot once outlived SIGINT by 15 s in CI with the 15 s default
+        e.setdefault("SWARMCOVER_EXIT_GRACE_S", "12")
         e.update(env or {})
         self.p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                   stdin=subprocess.DEVNULL, text=True, env=e,
