@@ -15,33 +15,9 @@ from __future__ import annotations
 import math
 from typing import Iterable, Mapping, Sequence
 
-PI = math.pi
-TWO_PI = 2.0 * math.pi
+from ground.angles import PI, TWO_PI, circmean, resultant, wrap  # noqa: F401  (re-exported)
 
 
-def wrap(a: float) -> float:
-    """Angle wrapped to [-pi, pi)."""
-    return (a + PI) % TWO_PI - PI
-
-
-def circmean(angles: Iterable[float]) -> float | None:
-    """Circular mean of angles (rad), or None if empty or if they cancel out."""
-    s = c = 0.0
-    for a in angles:
-        s += math.sin(a)
-        c += math.cos(a)
-    if s * s + c * c < 1e-18:
-        return None
-    return math.atan2(s, c)
-
-
-def resultant(angles: Sequence[float]) -> float:
-    """Mean resultant length in [0, 1] (1: all equal, ~0: spread evenly); 0 if empty."""
-    if not angles:
-        return 0.0
-    s = sum(math.sin(a) for a in angles)
-    c = sum(math.cos(a) for a in angles)
-    return math.hypot(s, c) / len(angles)
 
 
 # --------------------------------------------------------------------------- homing (4.5)

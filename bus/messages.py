@@ -187,7 +187,7 @@ class Message:
 def message(tag: str, version: int = 1, same_len: tuple = ()):
     """Class decorator: make a slotted dataclass and register it under ``tag``."""
 
-    def wrap(cls):
+    def register(cls):
         cls = dataclass(slots=True)(cls)
         cls.TAG = tag
         cls.VERSION = version
@@ -199,7 +199,7 @@ def message(tag: str, version: int = 1, same_len: tuple = ()):
         REGISTRY[tag] = cls
         return cls
 
-    return wrap
+    return register
 
 
 def _plain(v: Any) -> Any:

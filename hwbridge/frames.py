@@ -23,14 +23,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from ground.angles import wrap  # noqa: F401  (re-exported to the bridge's modules)
+
 UP_AXES = ("z", "y")
-
-
-def wrap(a: float) -> float:
-    """Wrap an angle (rad) to [-pi, pi); angles already in range are returned unchanged."""
-    if -math.pi <= a < math.pi:
-        return a
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 @dataclass(frozen=True, slots=True)

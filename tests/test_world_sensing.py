@@ -9,7 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from world.maps import WorldMap, map_from_path, segments_intersect
-from world.sensing import Sensors, sector_of, visible_pairs, wrap
+from ground.angles import wrap_array as wrap
+from world.sensing import Sensors, sector_of, visible_pairs
 
 R = 0.06
 

@@ -23,14 +23,11 @@ from itertools import chain
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ground.angles import wrap_array
+
 from .maps import SegmentGrid, WorldMap, segments_intersect
 
 TWO_PI = 2.0 * math.pi
-
-
-def wrap(a):
-    """Wrap angles to [-pi, pi)."""
-    return (np.asarray(a, float) + math.pi) % TWO_PI - math.pi
 
 
 def sector_of(bearing, n: int) -> np.ndarray:
@@ -40,7 +37,7 @@ def sector_of(bearing, n: int) -> np.ndarray:
 
 
 def sector_centres(n: int) -> np.ndarray:
-    return wrap(np.arange(n) * (TWO_PI / n))
+    return wrap_array(np.arange(n) * (TWO_PI / n))
 
 
 def visible_pairs(pos: np.ndarray, grid: SegmentGrid | None, rv: float, *,
@@ -152,11 +149,11 @@ class Sensors:
         ang = np.arctan2(d[:, 1], d[:, 0])
         obs = np.concatenate([i, j])
         tgt = np.concatenate([j, i])
-        true = wrap(np.concatenate([ang - heading[i], ang + math.pi - heading[j]]))
+        true = wrap_array(np.concatenate([ang - heading[i], ang + math.pi - heading[j]]))
         m = len(obs)
         noisy = true
         if self.sigma > 0 and m:
-            noisy = wrap(true + self.rng.normal(0.0, self.sigma, m))
+            noisy = wrap_array(true + self.rng.normal(0.0, self.sigma, m))
         half = m // 2
         back = np.concatenate([noisy[half:], noisy[:half]])
         keep = None

@@ -1,0 +1,5 @@
+"""The ground floor: what every room of the house needs, written once.
+
+``ground.angles`` (wrap, circular mean, sides). Pure functions, no I/O, numpy only where
+an array is asked for: light enough for every process, an agent included.
+"""

@@ -1,0 +1,77 @@
+"""The ground floor stays the only one: one wrap, one circular mean (issue 17), and they
+behave as documented, whatever the input (property tests)."""
+from __future__ import annotations
+
+import ast
+import math
+from pathlib import Path
+
+import numpy as np
+from hypothesis import given, strategies as st
+
+from ground.angles import PI, circmean, circular_mean, side, side_array, wrap, wrap_array
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGES = ("agents", "bus", "coordinator", "ground", "hwbridge", "swarmcover", "viz", "world", "bench")
+# function names that exist once, in the module named here
+ONE_HOME = {
+    "wrap": "ground/angles.py", "wrap_array": "ground/angles.py", "_wrap": None,
+    "circmean": "ground/angles.py", "circular_mean": "ground/angles.py", "circ_mean": None,
+}
+
+angles = st.floats(-1e4, 1e4, allow_nan=False)
+
+
+def _defs():
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            tree = ast.parse(path.read_text(), str(path))
+            for node in ast.walk(tree):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    yield path.relative_to(ROOT).as_posix(), node.name, node.lineno
+
+
+def test_angle_helpers_are_defined_once_in_the_ground_floor():
+    stray = [f"{p}:{line} defines {name}" for p, name, line in _defs()
+             if name in ONE_HOME and p != ONE_HOME[name]]
+    assert not stray, "a second copy of a ground-floor helper: " + "; ".join(stray)
+
+
+@given(angles)
+def test_wrap_is_half_open_and_keeps_the_angle(a):
+    w = wrap(a)
+    assert -PI <= w < PI
+    assert math.isclose(math.cos(w), math.cos(a), abs_tol=1e-9)
+    assert math.isclose(math.sin(w), math.sin(a), abs_tol=1e-9)
+
+
+@given(st.lists(angles, min_size=1, max_size=20))
+def test_wrap_array_agrees_with_wrap(xs):
+    wa = wrap_array(np.array(xs))
+    assert np.all((wa >= -PI) & (wa < PI))
+    assert np.allclose(np.cos(wa), np.cos([wrap(x) for x in xs]), atol=1e-9)
+    assert np.allclose(np.sin(wa), np.sin([wrap(x) for x in xs]), atol=1e-9)
+    inside = [x for x in xs if -PI <= x < PI]
+    assert wrap_array(np.array(inside)).tolist() == inside == [wrap(x) for x in inside]
+
+
+def test_exact_pi_wraps_to_minus_pi_in_both_and_has_no_side():
+    assert wrap(PI) == -PI and wrap(-PI) == -PI and wrap(3 * PI) == -PI
+    assert wrap_array(np.array([PI, -PI, -1e-300]))[0] == -PI
+    assert wrap_array(np.array([-1e-20]))[0] < PI          # np.mod rounding to 2pi is caught
+    assert side(PI) == 0 and side(-PI) == 0 and side(0.0) == 0
+    assert side(0.1) == 1 and side(-0.1) == -1 and side(PI - 1e-9) == 1
+    assert side_array(np.array([PI, -PI, 0.0, 0.2, -0.2])).tolist() == [0, 0, 0, 1, -1]
+
+
+@given(angles, st.floats(0.01, 1.0))
+def test_circular_mean_of_a_symmetric_pair_is_its_centre(c, half):
+    m, r = circular_mean([c - half, c + half])
+    assert abs(wrap(m - c)) < 1e-6
+    assert math.isclose(r, math.cos(half), abs_tol=1e-9)
+    assert abs(wrap(circmean([c - half, c + half]) - c)) < 1e-6
+
+
+def test_circular_mean_of_nothing_and_of_opposites():
+    assert circular_mean([]) == (0.0, 0.0)
+    assert circmean([]) is None and circmean([0.0, PI]) is None
