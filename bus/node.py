@@ -1,0 +1,87 @@
+"""The one process skeleton: every swarmcover process's ``main`` is its wiring alone.
+
+``run_node`` owns what each process used to repeat: the argument parser with the shared
+Zenoh flags (layered as in zenoh-python's examples) and ``--log-level``, logging, opening
+the session (exit 2 with the router named when it cannot be opened), the Shutdown context
+(SIGINT/SIGTERM -> an event, bounded exit), closing the session on every path, and the
+exit codes:
+
+  * 0: the node ran and stopped normally (its ``serve`` returned 0 or None);
+  * 1: only what ``serve`` returns itself ("ran, not certified" for run-like commands);
+  * 2: a usage or configuration error (``UsageError``, ``ValueError``, ``SystemExit`` with a
+    message, or a session that cannot be opened), logged as one line, never a traceback.
+
+A process writes ``READY <what>`` on stdout through :func:`ready` once it serves, which
+supervisors and tests wait for.
+
+    def main(argv=None) -> int:
+        return run_node("swarmcover demo", __doc__, _args, _serve, argv=argv)
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+from typing import Callable
+
+import zenoh
+
+from .keys import Keys
+from .session import Shutdown, add_zenoh_args, keys_from_args, open_session, setup_logging
+
+__all__ = ["UsageError", "run_node", "ready"]
+
+
+class UsageError(ValueError):
+    """A bad flag, config field or input: the process ends with exit code 2 and this
+    message (which names the flag or field and its value)."""
+
+
+Serve = Callable[[argparse.Namespace, zenoh.Session, Keys, Shutdown], "int | None"]
+
+
+def run_node(prog: str, description: str | None, add_args: Callable[[argparse.ArgumentParser], None],
+             serve: Serve, *, argv: list[str] | None = None, logger: str | None = None,
+             mode: str = "client", session_mode: str | None = None,
+             before_session: Callable[[argparse.Namespace], None] | None = None,
+             formatter_class=argparse.HelpFormatter) -> int:
+    """Parse flags, set up logging, open the session, run ``serve`` inside Shutdown.
+
+    add_args(parser): the process's own flags (the Zenoh flags and --log-level are added).
+    serve(args, session, keys, stop): the process's loop; its return value is the exit code
+      (None means 0). It must return soon after ``stop.is_set()``.
+    mode: the default Zenoh mode of the shared flags; session_mode: force a mode when
+      opening (a router opens its session in router mode).
+    before_session(args): checks that must fail before any connection (exit 2).
+    """
+    name = logger or prog.replace(" ", ".")
+    p = argparse.ArgumentParser(prog=prog, description=description, formatter_class=formatter_class)
+    add_args(p)
+    add_zenoh_args(p, mode=mode)
+    if not any(a.dest == "log_level" for a in p._actions):
+        p.add_argument("--log-level", default="INFO", help="logging level (default INFO)")
+    args = p.parse_args(argv)
+    log = setup_logging(args.log_level, name)
+    try:
+        if before_session is not None:
+            before_session(args)
+        keys = keys_from_args(args)
+        session = open_session(args, session_mode)
+    except (ValueError, ConnectionError) as e:
+        log.error("%s", e)
+        return 2
+    with Shutdown() as stop:
+        try:
+            code = serve(args, session, keys, stop)
+            return 0 if code is None else int(code)
+        except (ValueError, SystemExit) as e:
+            if isinstance(e, SystemExit) and (e.code is None or isinstance(e.code, int)):
+                return 0 if e.code is None else int(e.code)
+            log.error("%s", e)
+            return 2
+        finally:
+            session.close()
+
+
+def ready(what: str) -> None:
+    """Tell the supervisor (or a test) that this process serves: one ``READY`` line."""
+    print(f"READY {what}", flush=True)
