@@ -12,10 +12,10 @@ import os
 import signal
 import threading
 import time
-
-import pytest
+from pathlib import Path
 
 import msgpack
+import pytest
 
 from bus.keys import Keys
 from bus.messages import CmdVel, LiveCmd, MocapPose, WireError, decode
@@ -216,3 +216,63 @@ def _wait(pred, timeout, interval=0.05):
             return True
         time.sleep(interval)
     return pred()
+
+
+# --------------------------------------------------------------------------- a whole run
+
+@pytest.mark.timeout(400)
+def test_ctrl_c_on_a_mixed_run_stops_live_robots_first(procs, tmp_path):
+    """SIGINT to `swarmcover run configs/mixed.toml` while a live robot drives: zeros reach
+    the live robots at once and are their last word; agents and coordinator stop before
+    final.png is drawn (issue 22: non-zero commands went on 1.2-1.6 s, past final.png)."""
+    from hwbridge.ros2 import cmd_vel_key, decode_twist
+    root = Path(__file__).resolve().parent.parent
+    port, swarm, out = free_port(), "ci" + os.urandom(4).hex(), tmp_path / "run"
+    run = procs.swarmcover("run", root / "configs" / "mixed.toml", "--out", out, "--port", port,
+                           "--swarm", swarm, "--quiet", "--wall-timeout", "300")
+    run.wait_line("swarmcover run: mixed -> ", timeout=60)
+    s = client_session(f"tcp/127.0.0.1:{port}", swarm)
+    lock, cmds = threading.Lock(), []           # (wall time, robot, moving)
+
+    def on_live(sample):
+        m = decode(sample.payload.to_bytes(), LiveCmd)
+        with lock:
+            cmds.append((time.time(), 1, m.v != 0 or m.omega != 0))
+
+    def on_twist(sample):
+        tw = decode_twist(sample.payload.to_bytes())
+        with lock:
+            cmds.append((time.time(), 2, tw.lx != 0 or tw.az != 0))
+
+    subs = [s.declare_subscriber(Keys(swarm).live_cmd(1), on_live),
+            s.declare_subscriber(cmd_vel_key("ros2dds", "/scarab2"), on_twist)]
+
+    def driving():
+        with lock:
+            return any(mv and time.time() - t < 0.1 for t, _, mv in cmds[-10:])
+    try:
+        assert _wait(driving, 300, interval=0.01), run.output()[-3000:]
+        t_int = time.time()
+        run.signal(signal.SIGINT)
+        assert run.wait(120) == 130, run.output()[-3000:]
+        time.sleep(0.5)
+    finally:
+        for sub in subs:
+            sub.undeclare()
+        s.close()
+    with lock:
+        after = [(t, rid, mv) for t, rid, mv in cmds if t >= t_int]
+    last_moving = max([t for t, _, mv in after if mv], default=t_int)
+    png = (out / "final.png").stat().st_mtime
+    logs = [out / "logs" / "coordinator.log"] + sorted((out / "logs").glob("agent-*.log"))
+    last_log = max(p.stat().st_mtime for p in logs)
+    n_moving = sum(mv for _, _, mv in after)
+    print(f"after SIGINT: {n_moving} non-zero live commands, the last at "
+          f"+{last_moving - t_int:.3f} s, "
+          f"agents/coordinator last wrote +{last_log - t_int:.3f} s, "
+          f"final.png +{png - t_int:.3f} s")
+    for rid in (1, 2):                 # each live robot's last word is a stop
+        mine = [mv for _, r, mv in after if r == rid]
+        assert mine and not mine[-1], (rid, after[-20:])
+    assert last_moving - t_int < 0.5, after[:40]     # was 1.2-1.6 s (issue 22)
+    assert last_moving < last_log < png             # zeros first, then stop, then draw
