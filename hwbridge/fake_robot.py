@@ -131,7 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="swarmcover fake-robot", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--id", type=int, required=True, help="robot id (as in [hwbridge.robots])")
-    p.add_argument("--body", default=None, help="mocap rigid-body name (default: from --config)")
+    p.add_argument("--body", default=None, help="mocap rigid-body name (default: from CONFIG)")
     p.add_argument("run_config", nargs="?", metavar="CONFIG",
                    help="run config (TOML) to take the [hwbridge] settings of this robot from")
     p.add_argument("--run-config", "-c", dest="run_config_opt", metavar="CONFIG",
@@ -160,7 +160,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="map (default): the body stops at the walls of the run's map (from "
                         "CONFIG, else the world's world/info), as a physical robot in that room "
                         "does; none: an open floor")
-    p.add_argument("--duration", type=float, default=0.0, help="exit after S seconds")
+    p.add_argument("--duration", type=float, default=0.0, metavar="S", help="exit after S seconds")
     p.add_argument("--log-level", default="INFO")
     return p
 
@@ -180,7 +180,7 @@ def resolve(args) -> dict:
                    ros_domain=cfg.ros_domain, ros_bridge_namespace=cfg.ros_bridge_namespace,
                    body=args.body or r.body, sources=cfg.map_sources, source=r.source)
     if out["body"] is None:
-        raise SystemExit("swarmcover fake-robot: --body is required without --run-config")
+        raise SystemExit("swarmcover fake-robot: --body is required without a CONFIG")
     for flag, key in (("output", "output"), ("ros_mapping", "ros_mapping"),
                       ("ros_namespace", "ros_namespace"), ("start", "start"),
                       ("up_axis", "up_axis"), ("transform", "transform")):
