@@ -271,6 +271,8 @@ def test_ctrl_c_on_a_mixed_run_stops_live_robots_first(procs, tmp_path):
           f"+{last_moving - t_int:.3f} s, "
           f"agents/coordinator last wrote +{last_log - t_int:.3f} s, "
           f"final.png +{png - t_int:.3f} s")
+    for f in sorted((out / "logs").glob("fake-robot-*.log")):
+        print(next((ln for ln in f.read_text().splitlines() if ln.startswith("FINAL")), f))
     for rid in (1, 2):                 # each live robot's last word is a stop
         mine = [mv for _, r, mv in after if r == rid]
         assert mine and not mine[-1], (rid, after[-20:])
