@@ -61,9 +61,12 @@ def _check_int(v: Any, lo: int, hi: int) -> int:
     return v
 
 
-def f_float(lo: float = -1e9, hi: float = 1e9, default: float = 0.0):
+def f_float(lo: float = -1e9, hi: float = 1e9, default: float = 0.0, optional: bool = False):
+    """optional: a payload may omit the field (decoded as ``default``), so a field added
+    later stays wire compatible with senders that predate it."""
     return field(default=default, metadata={"check": lambda v: _check_float(v, lo, hi),
-                                             "kind": "float", "lo": lo, "hi": hi})
+                                             "kind": "float", "lo": lo, "hi": hi,
+                                             "optional": optional})
 
 
 def f_int(lo: int = -(2**62), hi: int = 2**62, default: int = 0):
@@ -220,6 +223,8 @@ def _validate_into(cls, d: dict, target=None):
     vals = {}
     for name, check in cls._FIELDS:
         if name not in d:
+            if cls._META[name].get("optional"):
+                continue                      # the dataclass default applies
             raise WireError(cls.TAG, name, "missing")
         try:
             vals[name] = check(d[name])
@@ -517,11 +522,18 @@ class MocapPose(Message):
 
 @message("LiveCmd")
 class LiveCmd(Message):
-    """hwbridge -> live robot driver: unicycle command, already clamped (m/s, rad/s)."""
+    """hwbridge -> live robot driver: unicycle command, already clamped (m/s, rad/s).
+
+    ttl: how long (s) the driver may execute this command, counted from its receipt on the
+    robot's own clock (no clock sync needed); then it stops unless a newer command came.
+    0 (or absent, from senders that predate the field) means "not given": the driver
+    applies its own default timeout. A driver may cap it (hwbridge/README.md).
+    """
     robot: int = f_int(0)
     t: float = f_float(0.0)
     v: float = f_float(-_ABSURD_SPEED, _ABSURD_SPEED)
     omega: float = f_float(-_ABSURD_SPEED, _ABSURD_SPEED)
+    ttl: float = f_float(0.0, 10.0, optional=True)
 
 
 @message("TwinCmd")

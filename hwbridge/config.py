@@ -20,6 +20,8 @@ sections are only read (rv, [map].boundary, [robots].v_max/w_max), never checked
     silence_s = 0.5               # warn when a body is silent this long
     rate_hz = 50                  # twin sync loop (Hz)
     cmd_rate_hz = 20              # command output to robots, zeros included (Hz)
+    cmd_ttl_s = 0.3               # LiveCmd.ttl: the robot's driver stops this long after
+                                  # the last command it received (>= 2 / cmd_rate_hz)
     pose_rate_hz = 10             # robot/<id>/odom (Hz)
     k_omega = 1.5                 # unicycle mapping of a body-frame vy (spec 4.8)
     k_v = 1.0
@@ -48,6 +50,8 @@ sections are only read (rv, [map].boundary, [robots].v_max/w_max), never checked
     mocap_noise_m = 0.001
     mocap_noise_rad = 0.002
     seed = 0
+    cmd_timeout_s = 0.5           # the stand-in driver's own timeout: for commands without a
+                                  # ttl (ROS 2 Twist, old senders) and the cap on any ttl
 """
 from __future__ import annotations
 
@@ -66,12 +70,12 @@ KINDS = ("diffdrive",)   # live robots are differential drive (Scarab-like)
 
 TOP_KEYS = {"mocap", "up_axis", "transform", "kp", "k_theta", "feedforward", "teleport_dist",
             "deadman_s", "geofence", "geofence_margin", "rate_band_hz", "silence_s", "rate_hz",
-            "cmd_rate_hz", "pose_rate_hz", "k_omega", "k_v", "ros_domain",
+            "cmd_rate_hz", "cmd_ttl_s", "pose_rate_hz", "k_omega", "k_v", "ros_domain",
             "ros_bridge_namespace", "robots", "fake"}
 ROBOT_KEYS = {"id", "body", "kind", "output", "ros_mapping", "ros_namespace", "v_max",
               "w_max", "source", "fake", "start"}
 FAKE_KEYS = {"latency_s", "v_noise", "w_noise", "slip", "mocap_rate_hz", "mocap_noise_m",
-             "mocap_noise_rad", "seed"}
+             "mocap_noise_rad", "seed", "cmd_timeout_s"}
 TRANSFORM_KEYS = {"yaw", "tx", "ty", "scale"}
 
 
@@ -104,6 +108,7 @@ class FakeParams:
     mocap_noise_m: float = 0.001
     mocap_noise_rad: float = 0.002
     seed: int = 0
+    cmd_timeout_s: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -126,6 +131,7 @@ class BridgeConfig:
     silence_s: float = 0.5
     rate_hz: float = 50.0
     cmd_rate_hz: float = 20.0
+    cmd_ttl_s: float = 0.3
     pose_rate_hz: float = 10.0
     k_omega: float = 1.5
     k_v: float = 1.0
@@ -315,6 +321,7 @@ def from_dict(doc: dict, path: str = "<config>") -> BridgeConfig:
         mocap_noise_m=fc.num(fk, "mocap_noise_m", 0.001, 0.0, 1.0),
         mocap_noise_rad=fc.num(fk, "mocap_noise_rad", 0.002, 0.0, 1.0),
         seed=fc.int_(fk, "seed", 0, 0, 2**31),
+        cmd_timeout_s=fc.num(fk, "cmd_timeout_s", 0.5, 0.0, 10.0, strict_lo=True),
     )
 
     rl = hb.get("robots")
@@ -357,6 +364,12 @@ def from_dict(doc: dict, path: str = "<config>") -> BridgeConfig:
             source=ctx.int_(r, "source", 0, 0, 1000),
             fake=ctx.bool_(r, "fake", False), start=start))
 
+    cmd_rate = c.num(hb, "cmd_rate_hz", 20.0, 0.0, 1000.0, strict_lo=True)
+    ttl = c.num(hb, "cmd_ttl_s", 0.3, 0.0, 10.0, strict_lo=True)
+    if ttl < 2.0 / cmd_rate:
+        raise c.err("cmd_ttl_s", hb.get("cmd_ttl_s", 0.3),
+                    f"shorter than two command periods (2 / cmd_rate_hz = {2.0 / cmd_rate:g} s): "
+                    f"a robot would stop between commands")
     return BridgeConfig(
         path=path, name=str(name), rv=rv, robots=tuple(robots), mocap=mocap,
         up_axis=c.choice(hb, "up_axis", "z", UP_AXES), transform=transform,
@@ -370,7 +383,7 @@ def from_dict(doc: dict, path: str = "<config>") -> BridgeConfig:
         rate_band_hz=(float(band[0]), float(band[1])),
         silence_s=c.num(hb, "silence_s", 0.5, 0.0, 60.0, strict_lo=True),
         rate_hz=c.num(hb, "rate_hz", 50.0, 0.0, 1000.0, strict_lo=True),
-        cmd_rate_hz=c.num(hb, "cmd_rate_hz", 20.0, 0.0, 1000.0, strict_lo=True),
+        cmd_rate_hz=cmd_rate, cmd_ttl_s=ttl,
         pose_rate_hz=c.num(hb, "pose_rate_hz", 10.0, 0.0, 1000.0, strict_lo=True),
         k_omega=c.num(hb, "k_omega", 1.5, 0.0, 100.0, strict_lo=True),
         k_v=c.num(hb, "k_v", 1.0, 0.0, 100.0, strict_lo=True),

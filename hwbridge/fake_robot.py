@@ -8,12 +8,18 @@ reports its true pose as a motion-capture system would: MocapPose on
 ``sc/<swarm>/mocap/<body>`` in the mocap frame (``up_axis`` + the inverse of the
 [hwbridge] transform), with measurement noise, stamped with this host's monotonic clock
 (s; MocapPose.t cannot hold Unix time, and the bridge on the same host can then measure
-the transport latency). It keeps executing its last command until
-told otherwise (like a robot driver without a watchdog), so the bridge's deadman is what
-stops it.
+the transport latency).
 
-With ``--config`` it takes its output, ROS namespace, start pose, mocap frame and noise
-parameters from the run config's [hwbridge] section (flags override).
+It fails safe as a real driver must (hwbridge/driver.py): each command is executed only
+until its expiry -- LiveCmd.ttl seconds after its receipt, capped at --cmd-timeout; a Twist
+(no expiry field) or a LiveCmd without ttl gets --cmd-timeout -- and then the robot stops,
+whoever failed (bridge, router, network, agent). Its own loop checks the expiry every
+5 ms whether or not messages arrive; the Zenoh callback only queues. Each stop is logged
+("command expired") and counted (expiry_stops in the FINAL line).
+
+With a CONFIG (positional, or --run-config / -c) it takes its output, ROS namespace, start
+pose, mocap frame, noise and timeout from the run config's [hwbridge] section (flags
+override).
 """
 from __future__ import annotations
 
@@ -30,6 +36,7 @@ from bus.messages import LiveCmd, MocapPose
 from bus.session import (Mailbox, Receiver, Shutdown, add_zenoh_args, keys_from_args,
                          open_session, publisher, setup_logging)
 
+from .driver import CommandExpiry
 from .frames import Transform2D, world_to_mocap, wrap
 from .room import Room
 from .ros2 import CdrError, cmd_vel_key, decode_twist
@@ -124,7 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="swarmcover fake-robot", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--id", type=int, required=True, help="robot id (as in [hwbridge.robots])")
-    p.add_argument("--body", default=None, help="mocap rigid-body name (default: from --config)")
+    p.add_argument("--body", default=None, help="mocap rigid-body name (default: from CONFIG)")
     p.add_argument("run_config", nargs="?", metavar="CONFIG",
                    help="run config (TOML) to take the [hwbridge] settings of this robot from")
     p.add_argument("--run-config", "-c", dest="run_config_opt", metavar="CONFIG",
@@ -144,12 +151,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--up-axis", choices=("z", "y"), help="mocap frame up axis (default z)")
     p.add_argument("--transform", type=lambda s: Transform2D(*(float(v) for v in s.split(","))),
                    metavar="YAW,TX,TY,SCALE", help="mocap floor -> world transform")
+    p.add_argument("--cmd-timeout", type=float, metavar="S",
+                   help="the driver's own command timeout (s; default [hwbridge.fake] "
+                        "cmd_timeout_s, 0.5): for a Twist or a LiveCmd without ttl, and the "
+                        "cap on any LiveCmd.ttl")
     p.add_argument("--seed", type=int)
     p.add_argument("--walls", choices=("map", "none"), default="map",
                    help="map (default): the body stops at the walls of the run's map (from "
                         "CONFIG, else the world's world/info), as a physical robot in that room "
                         "does; none: an open floor")
-    p.add_argument("--duration", type=float, default=0.0, help="exit after S seconds")
+    p.add_argument("--duration", type=float, default=0.0, metavar="S", help="exit after S seconds")
     p.add_argument("--log-level", default="INFO")
     return p
 
@@ -169,7 +180,7 @@ def resolve(args) -> dict:
                    ros_domain=cfg.ros_domain, ros_bridge_namespace=cfg.ros_bridge_namespace,
                    body=args.body or r.body, sources=cfg.map_sources, source=r.source)
     if out["body"] is None:
-        raise SystemExit("swarmcover fake-robot: --body is required without --run-config")
+        raise SystemExit("swarmcover fake-robot: --body is required without a CONFIG")
     for flag, key in (("output", "output"), ("ros_mapping", "ros_mapping"),
                       ("ros_namespace", "ros_namespace"), ("start", "start"),
                       ("up_axis", "up_axis"), ("transform", "transform")):
@@ -187,6 +198,9 @@ def resolve(args) -> dict:
     out["noise_m"] = args.mocap_noise_m if args.mocap_noise_m is not None else f.mocap_noise_m
     out["noise_rad"] = args.mocap_noise_rad if args.mocap_noise_rad is not None else f.mocap_noise_rad
     out["seed"] = args.seed if args.seed is not None else f.seed + args.id
+    out["cmd_timeout"] = args.cmd_timeout if args.cmd_timeout is not None else f.cmd_timeout_s
+    if not (math.isfinite(out["cmd_timeout"]) and 0 < out["cmd_timeout"] <= 10):
+        raise ValueError(f"--cmd-timeout {out['cmd_timeout']!r}: expected seconds in (0, 10]")
     return out
 
 
@@ -249,6 +263,7 @@ def main(argv: list[str] | None = None) -> int:
             start = tuple(start) if start is not None else (0.0, 0.0, 0.0)
             room = make_room(args.walls, args.run_config, session, keys)
             sim = DiffDriveSim(start, o["drive"], o["seed"], room)
+            expiry = CommandExpiry(o["cmd_timeout"])
             rng = random.Random(o["seed"] + 7919)
             mb = Mailbox()
             rec = Receiver(log)
@@ -276,7 +291,7 @@ def main(argv: list[str] | None = None) -> int:
                         msg = rec.decode(key, payload, LiveCmd)
                         if msg is None or msg.robot != args.id:
                             continue
-                        v, w = msg.v, msg.omega
+                        v, w, ttl = msg.v, msg.omega, msg.ttl
                     else:
                         try:
                             tw = decode_twist(payload)
@@ -285,9 +300,14 @@ def main(argv: list[str] | None = None) -> int:
                             if bad == 1:
                                 log.warning("dropping invalid Twist on %s: %s", key, e)
                             continue
-                        v, w = tw.lx, tw.az
+                        v, w, ttl = tw.lx, tw.az, 0.0
                     sim.command(now, v, w)
+                    expiry.on_command(now, v, w, ttl)
                     n_cmd += 1
+                if expiry.expired(now):           # whoever failed: stop at the robot
+                    sim.command(now, 0.0, 0.0)
+                    log.warning("robot %d: command expired (%.2f s after the last command "
+                                "received): stopping", args.id, expiry.last_ttl)
                 x, y, th = sim.step(now, now - last)
                 last = now
                 if now >= next_mocap:
@@ -300,10 +320,12 @@ def main(argv: list[str] | None = None) -> int:
                     mocap_pub.put(MocapPose(body=o["body"], t=time.monotonic(), x=pos[0], y=pos[1],
                                             z=pos[2], qx=q[0], qy=q[1], qz=q[2], qw=q[3]).encode())
                 stop.wait(max(0.0, dt - (time.monotonic() - now)))
-            log.info("robot %d: %d commands, final pose (%.3f, %.3f, %.3f), %.1f s against a wall",
-                     args.id, n_cmd, sim.x, sim.y, sim.theta, sim.wall_time)
+            log.info("robot %d: %d commands, %d expiry stops, final pose (%.3f, %.3f, %.3f), "
+                     "%.1f s against a wall", args.id, n_cmd, expiry.stops, sim.x, sim.y,
+                     sim.theta, sim.wall_time)
             print(f"FINAL fake-robot {args.id} x={sim.x:.4f} y={sim.y:.4f} theta={sim.theta:.4f} "
-                  f"commands={n_cmd} wall_s={sim.wall_time:.1f}", flush=True)
+                  f"commands={n_cmd} expiry_stops={expiry.stops} wall_s={sim.wall_time:.1f}",
+                  flush=True)
         finally:
             for s in subs:
                 s.undeclare()

@@ -14,6 +14,8 @@ For each live robot of the run config's [hwbridge] section (see hwbridge/config.
   * forwards the robot's agent commands (CmdVel on robot/<id>/cmd_vel) to the robot as
     LiveCmd or a ROS 2 Twist, through the safety gate (clamp, deadman, geofence; zeros are
     sent actively at cmd_rate_hz); commands for robots that are not live are never sent.
+    Each LiveCmd carries ttl = cmd_ttl_s: the robot's driver stops by itself when it
+    passes, should this bridge or the network fail (hwbridge/driver.py).
 
 At exit it sends zeros to every robot and prints ``SUMMARY {json}`` (tracking error,
 lag, formation discrepancy); ``--report FILE`` writes the same JSON.

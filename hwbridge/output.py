@@ -1,9 +1,13 @@
 """Command output to live robots: unicycle conversion and the two wire formats.
 
-  * ``output = "zenoh"``: LiveCmd (msgpack: robot, t, v, omega) on ``sc/<swarm>/live/<id>/cmd``;
+  * ``output = "zenoh"``: LiveCmd (msgpack: robot, t, v, omega, ttl) on
+    ``sc/<swarm>/live/<id>/cmd``; ``ttl`` ([hwbridge] cmd_ttl_s) is how long the robot's
+    driver may execute it after receipt (hwbridge/driver.py);
   * ``output = "ros2"``: geometry_msgs/Twist in CDR on the key zenoh-bridge-ros2dds or
     rmw_zenoh maps ``<ros_namespace>/cmd_vel`` to (see :mod:`hwbridge.ros2`); with
-    rmw_zenoh each sample carries the attachment rmw_zenoh requires.
+    rmw_zenoh each sample carries the attachment rmw_zenoh requires. A Twist has no
+    expiry field: the robot's base controller must time out cmd_vel itself
+    (hwbridge/README.md, "What a robot's driver must do").
 
 Both publishers use congestion control BLOCK and express (a command must not be dropped
 nor wait for batching).
@@ -34,17 +38,19 @@ def to_unicycle(vx: float, vy: float, wz: float, k_omega: float = 1.5,
 
 
 class LiveCmdOutput:
-    """LiveCmd on live/<id>/cmd."""
+    """LiveCmd on live/<id>/cmd, each valid for ``ttl`` seconds after its receipt."""
 
-    def __init__(self, session, keys, robot: int):
+    def __init__(self, session, keys, robot: int, ttl: float = 0.3):
         from bus.session import publisher
         self.robot = robot
+        self.ttl = ttl
         self.key = keys.live_cmd(robot)
         self.pub = publisher(session, self.key, block=True, express=True)
 
     def send(self, v: float, omega: float, t: float) -> None:
         from bus.messages import LiveCmd
-        self.pub.put(LiveCmd(robot=self.robot, t=max(0.0, t), v=v, omega=omega).encode())
+        self.pub.put(LiveCmd(robot=self.robot, t=max(0.0, t), v=v, omega=omega,
+                             ttl=self.ttl).encode())
 
     def close(self) -> None:
         try:
@@ -84,7 +90,7 @@ class Ros2TwistOutput:
 def make_output(session, keys, robot, cfg):
     """The output of one :class:`hwbridge.config.LiveRobot` under a BridgeConfig."""
     if robot.output == "zenoh":
-        return LiveCmdOutput(session, keys, robot.id)
+        return LiveCmdOutput(session, keys, robot.id, cfg.cmd_ttl_s)
     key = cmd_vel_key(robot.ros_mapping, robot.ros_namespace, cfg.ros_domain,
                       cfg.ros_bridge_namespace)
     return Ros2TwistOutput(session, key, robot.ros_mapping)

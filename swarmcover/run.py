@@ -22,6 +22,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -359,6 +360,8 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
         hw = cfg.section("hwbridge")
         if hw:
             _start_hwbridge(launcher, hw, conf_path, out)
+            threading.Thread(target=lambda: stop.wait() and _halt_movers(launcher, then=()),
+                             daemon=True, name="halt-live").start()  # Ctrl-C: zeros at once
         if args.view:
             launcher.start("view", ["view", "--port", str(args.view_port)])
             print(f"live view: http://127.0.0.1:{args.view_port}/", file=sys.stderr, flush=True)
@@ -417,6 +420,7 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                 state["reason"] = f"wall timeout {args.wall_timeout:.0f} s"
                 break
     finally:
+        _halt_movers(launcher)
         progress.close()
         for s in subs:
             s.undeclare()
@@ -443,6 +447,28 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
     _final_png(session, keys, out, last_truth, last_cx, cfg)
     print(json.dumps(summary), flush=True)
     return 0 if state["certified"] else 1
+
+
+def _halt_movers(launcher: Launcher, first: tuple = ("hwbridge",),
+                 then: tuple = ("agent-", "coordinator"), grace: float = 5.0) -> None:
+    """The first step of every ending of a run (Ctrl-C, error, timeout, certified), before
+    the summary and figures: SIGINT the hardware bridge and wait for it (it sends zeros to
+    every live robot, then exits; should it hang or die, each robot's command expiry stops
+    it), then every process that moves robots (agents, coordinator), so nothing drives
+    while the run folder is written. World and router stay up for final.png and the
+    stand-in robots until Launcher.stop_all. Safe to call again."""
+    for group in (first, then):
+        kids = [(n, c) for n, c in list(launcher.children.items())
+                if n.startswith(group) and c.alive()]
+        for _, c in kids:
+            c.signal(signal.SIGINT)
+        end = time.monotonic() + grace
+        for n, c in kids:
+            try:
+                c.p.wait(max(0.1, end - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                log.warning("%s did not stop within %.0f s of SIGINT: killing it", n, grace)
+                c.signal(signal.SIGKILL)
 
 
 def _failures_healed(coord_log: Path) -> int:

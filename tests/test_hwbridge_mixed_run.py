@@ -40,6 +40,7 @@ def test_mixed_run_covers_with_live_stand_ins(procs, tmp_path):
         fin = (logs / f"fake-robot-{rid}.log").read_text()
         m = re.search(r"FINAL fake-robot \d+ x=(\S+) y=(\S+) .* commands=(\d+)", fin)
         assert m and int(m.group(3)) > 0
+        print(next(ln for ln in fin.splitlines() if ln.startswith("FINAL")))   # expiry_stops
         # the stand-in stops at the walls like a real robot: still in the 2.5 m x 2 m room
         x, y = float(m.group(1)), float(m.group(2))
         assert 0.0 < x < 2.5 and 0.0 < y < 2.0, fin[-500:]
