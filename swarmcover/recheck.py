@@ -10,7 +10,8 @@ from the message and checks the claim again:
 2. the frontier K is empty;
 3. over GF(2), the obstacle edges O are the boundary of a 2-chain of the message's
    triangles, solved again by ``coordinator.certify`` on the rebuilt complex (an O with odd
-   vertices, where edges cross, is closed by the certificate's slack search);
+   vertices, where edges cross, is first closed by short joins, at most MAX_JOIN edges
+   each and MAX_ADDED x |O| in all, then by the certificate's slack search);
 4. with ground truth (``positions``, the world's): every occupant is a robot of the world,
    and every edge joins robots at most rv apart (with ``tol`` for motion since the cycle).
 
@@ -118,9 +119,14 @@ def recheck(cx, positions: dict | None = None, rv: float | None = None,
     return Recheck(True)
 
 
+MAX_JOIN = 4        # edges joining two odd vertices of O, where fence edges cross
+MAX_ADDED = 0.25    # x |O|: the most edges a closure may add (pillar_hall's end state: 15 of 87)
+
+
 def _closed(topo, fence, z, deg):
-    """certify on O closed into a cycle: each pair of odd vertices joined by the shortest
-    path of edges (a T-join), then the certificate's slack search around them."""
+    """certify on O closed into a cycle: each odd vertex joined to the nearest other one by
+    a shortest path of at most MAX_JOIN edges (a T-join, as the fence closes crossings), then
+    the certificate's slack search around them. None if no such closure exists."""
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import shortest_path
 
@@ -136,7 +142,7 @@ def _closed(topo, fence, z, deg):
         dist, pred = shortest_path(g, directed=False, unweighted=True, indices=[a],
                                    return_predecessors=True)
         b = min(odd, key=lambda x: dist[0, x])
-        if not np.isfinite(dist[0, b]):
+        if not dist[0, b] <= MAX_JOIN:
             return None
         odd.remove(b)
         x = b
@@ -144,6 +150,9 @@ def _closed(topo, fence, z, deg):
             p = int(pred[0, x])
             zz[eid[(min(p, x), max(p, x))]] ^= True
             x = p
+    added = int((zz & ~z).sum())
+    if not zz.any() or added > MAX_ADDED * int(z.sum()):
+        return None
     fence.z = zz
     fence.z_repair = np.nonzero(zz & ~z)[0] if (zz & ~z).any() else np.array([0])
     return certify(topo, fence)
