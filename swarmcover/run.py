@@ -629,7 +629,7 @@ def _first_error(path: Path) -> str:
     for ln in lines:
         if " ERROR " in ln or ln.startswith("ERROR") or "Error:" in ln:
             return ln.split(" ERROR ", 1)[-1].strip()[:300]
-    return lines[-1].strip()[:300] if lines else "(empty log)"
+    return ("last log line: " + lines[-1].strip()[:300]) if lines else "(empty log)"
 
 
 def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Keys, out: Path,
