@@ -105,7 +105,6 @@ def test_killed_agents_and_coordinator_are_healed(procs, tmp_path):
     rows = [json.loads(x) for x in (out / "cycles.jsonl").read_text().splitlines()]
     assert len({r["epoch"] for r in rows}) == 2 and s["cycles"] >= 10
     assert [r["cycle"] for r in rows] == sorted(r["cycle"] for r in rows)
-    assert s["failures_healed"] >= 1   # from the coordinator's Complex, not its log
     log = (out / "logs" / "coordinator.log").read_text()
     assert "robot 3 failed" in log
     assert "resuming with" in log
