@@ -98,3 +98,70 @@ def sample_origin(sample: zenoh.Sample) -> tuple[str | None, bytes | None]:
         zid = None
     att = sample.attachment
     return zid, (att.to_bytes() if att is not None else None)
+
+
+class CoordinatorGate:
+    """For viewers: let a Complex through only from the coordinator.
+
+    With the run key (``run --view`` gives it to the viewer it starts) a sample needs a valid
+    signature. Without it (a viewer started by hand, on another host): trust on first use
+    per coordinator life, i.e. the first source zid seen while a coordinator liveliness token
+    (``alive/coordinator/*``) is present is pinned until the tokens go away; samples with no
+    ``source_info``, from another zid, or while no coordinator is alive are dropped and
+    counted in ``refused``. ``wrap(callback)`` gives a Zenoh callback that filters.
+    """
+
+    def __init__(self, key: bytes | None = None):
+        self.key = key if key is not None else key_from_env()
+        self.zid: str | None = None
+        self.tokens: set[str] = set()
+        self.refused = 0
+        self._sub = None
+
+    def attach(self, session: zenoh.Session, prefix: str,
+               timeout: float = 2.0) -> "CoordinatorGate":
+        """Watch the coordinator's tokens; the ones present now are fetched before this
+        returns, so a Complex that arrives right after is not refused for want of them."""
+        key = f"{prefix}/alive/coordinator/*"
+        self._sub = session.liveliness().declare_subscriber(key, self._on_token, history=True)
+        try:
+            for reply in session.liveliness().get(key, timeout=timeout):
+                if reply.ok is not None:
+                    self.tokens.add(str(reply.ok.key_expr))
+        except Exception:  # no router yet: the subscriber's history fills them in later
+            pass
+        return self
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        k = str(sample.key_expr)
+        if sample.kind == zenoh.SampleKind.PUT:
+            self.tokens.add(k)
+        else:
+            self.tokens.discard(k)
+            if not self.tokens:
+                self.zid = None
+
+    def accept(self, sample: zenoh.Sample) -> bool:
+        zid, att = sample_origin(sample)
+        if self.key is not None:
+            ok = verify(self.key, str(sample.key_expr), sample.payload.to_bytes(), att)
+        elif zid is None or not self.tokens:
+            ok = False
+        else:
+            if self.zid is None:
+                self.zid = zid
+            ok = zid == self.zid
+        if not ok:
+            self.refused += 1
+        return ok
+
+    def wrap(self, callback):
+        def cb(sample):
+            if self.accept(sample):
+                callback(sample)
+        return cb
+
+    def undeclare(self) -> None:
+        if self._sub is not None:
+            self._sub.undeclare()
+            self._sub = None

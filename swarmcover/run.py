@@ -664,8 +664,9 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
         hw = cfg.section("hwbridge")
         if hw:
             _start_hwbridge(launcher, hw, conf_path, out)
-        if args.view:
-            launcher.start("view", ["view", "--port", str(args.view_port)])
+        if args.view:  # it checks the coordinator's signatures with the run key
+            launcher.start("view", ["view", "--port", str(args.view_port)],
+                           env={KEY_ENV: coord.key.hex()})
             print(f"live view: http://127.0.0.1:{args.view_port}/", file=sys.stderr, flush=True)
         _start_coordinator(launcher, conf_path, coord)
         last_check = 0.0
