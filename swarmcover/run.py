@@ -386,7 +386,8 @@ class RunState:
     def on_cycle(self, cx: Complex) -> int:
         """Cycles across coordinator restarts (each restart has its own epoch and counts
         from 0): a finished epoch counts its last planned cycle + 1."""
-        self.epochs[cx.epoch] = [cx.cycle, cx.failures_healed]
+        c, h = self.epochs.get(cx.epoch, (cx.cycle, cx.failures_healed))
+        self.epochs[cx.epoch] = [max(c, cx.cycle), max(h, cx.failures_healed)]
         return self.cycles
 
     @property
@@ -733,6 +734,8 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                             state.end(*ended)
             if pending_cert is not None and not state.stop_reason:
                 cx, since = pending_cert
+                if not coord.token:  # ask: a token event may have been missed or reordered
+                    coord.token = _token_present(session, keys)
                 if coord.token and launcher.children["coordinator"].alive():
                     pending_cert = None
                     pos = None
@@ -796,6 +799,14 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
     for key, payload, *_ in inbox.items(0.0):
         if keys.relative(key) == "world/truth":
             state.last_truth = rx.decode(key, payload, Truth) or state.last_truth
+
+
+def _token_present(session, keys: Keys) -> bool:
+    try:
+        return any(r.ok is not None for r in session.liveliness().get(
+            keys.alive("coordinator", "*"), timeout=1.0))
+    except Exception:
+        return False
 
 
 def _check_agents(launcher: Launcher, unready: dict, state: RunState) -> None:
