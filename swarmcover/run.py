@@ -463,6 +463,7 @@ def main(argv: list[str] | None = None) -> int:
     launcher = Launcher(logdir, zargs)
     t_wall0 = time.monotonic()
     state = RunState(limits=limits)
+    summary: dict = {}
     with Shutdown(grace_s=0) as stop:  # a supervisor: stop_all bounds its own exit
         session = None
         try:
@@ -492,7 +493,10 @@ def main(argv: list[str] | None = None) -> int:
                 session.close()
             launcher.stop_all(order=["hwbridge", "coordinator", "world", "router"])
             state.end("error", "the run ended without a reason", EXIT_FAILED)
-            summary = _write_report(args, cfg, wmap, out, state, t_wall0)
+            try:
+                summary = _write_report(args, cfg, wmap, out, state, t_wall0)
+            except OSError as e:
+                log.error("could not write %s: %s", out / "summary.json", e)
     warn = ""
     if summary.get("false_certificate"):
         warn = (f" -- WARNING: FALSE CERTIFICATE: ground truth shows "
