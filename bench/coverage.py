@@ -47,7 +47,10 @@ def run_inproc(config: str, seed: int, timeout: float) -> dict:
     from swarmcover.run import compute_summary
     from swarmcover.simloop import SimLoop
     from world.config import load_config
+    from swarmcover.run import default_robots_max
+    from world.maps import build_map
     cfg = load_config(config)
+    cfg, _, limits = default_robots_max(cfg, build_map(cfg), "")  # as `run` does
     sim = SimLoop(cfg, seed=seed)
     t0 = time.monotonic()
     res = sim.run(max_sim_s=20_000, max_wall_s=timeout)
@@ -59,7 +62,7 @@ def run_inproc(config: str, seed: int, timeout: float) -> dict:
                  stop_reason=_inproc_reason(res), stop_detail=res.stop_reason,
                  wall_time_s=time.monotonic() - t0, robots_spawned=res.robots_spawned,
                  failures_healed=res.deployer.failures_healed, config=config, seed=seed,
-                 mode="inproc")
+                 mode="inproc", **limits)
     return compute_summary(cfg, sim.wm, truth, res.final, extra)
 
 
