@@ -210,3 +210,22 @@ def test_recheck_accepts_the_pillar_hall_end_state_whose_fence_crosses_itself():
     # fewer is: the closure re-adds it, as the coordinator's fence repair would)
     assert not recheck(Complex(**{**{k: v for k, v in msg.to_dict().items() if k[0] != "_"},
                                   "obstacle": msg.obstacle[::2]}), pos, 1.0).ok
+
+
+def test_only_the_coordinators_session_with_the_run_key_is_believed():
+    from bus.trust import mac, new_key
+    from swarmcover.run import _Coordinator
+    key = bytes.fromhex(new_key())
+    c = _Coordinator(key)
+    c.started("READY coordinator epoch 123 zid 0a1b2c")
+    assert (c.zid, c.epoch) == ("0a1b2c", 123)
+    k, payload = "sc/tiny/coord/complex", _certified_square().encode()
+    assert c.check(k, payload, "0a1b2c", mac(key, k, payload)) == ""
+    assert c.check(k, payload, "ffff", mac(key, k, payload)) == "not from the coordinator's session"
+    assert c.check(k, payload, None, None) == "not from the coordinator's session"
+    # the right zid (spoofed source_info) without the key, or with a payload changed
+    assert c.check(k, payload, "0a1b2c", None) == "bad or missing run-key signature"
+    assert c.check(k, payload, "0a1b2c", mac(bytes(32), k, payload)) != ""
+    assert c.check(k, payload + b"x", "0a1b2c", mac(key, k, payload)) != ""
+    # a genuine sample moved to another key does not verify either
+    assert c.check("sc/tiny/world/spawn", payload, "0a1b2c", mac(key, k, payload)) != ""
