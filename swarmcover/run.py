@@ -476,9 +476,17 @@ def main(argv: list[str] | None = None) -> int:
             session = _open(endpoint, swarm)
             _supervise(args, cfg, wmap, conf_path, launcher, session, Keys(swarm), out,
                        stop, state, t_wall0, live_limits)
-        except RuntimeError as e:
+        except RuntimeError as e:  # a part did not start
             log.error("%s", e)
-            state.end("error", str(e).splitlines()[0], EXIT_FAILED)
+            w = launcher.children.get("world")
+            wrc = w.p.poll() if w is not None else None
+            if wrc == EXIT_USAGE:   # the world refused the config
+                state.end("error", f"the world exited at start (exit 2): "
+                          f"{_first_error(w.log_path)}", EXIT_USAGE)
+            elif wrc is not None:
+                state.end("world_died", str(e).splitlines()[0], EXIT_FAILED)
+            else:
+                state.end("error", str(e).splitlines()[0], EXIT_FAILED)
         except KeyboardInterrupt:
             state.end("interrupted", "Ctrl-C", EXIT_INTERRUPTED)
         except Exception as e:  # a bug in run itself: still stop everything and report
