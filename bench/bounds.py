@@ -3,7 +3,8 @@
 For each config, from the map alone (no simulation):
 
 * ``ideal_count``: the baseline of ``summary.json``, A_free / (sqrt(3)/2 rv^2).
-* ``euler_bound``: a lower bound on the robots of any certifiable swarm. Certified coverage
+* ``euler_bound``: a lower bound on the robots of any certifiable swarm (computed by
+  ``world.groundtruth.euler_bound``, which ``summary.json`` uses too). Certified coverage
   means the free area is tiled by Rips triangles (edges <= rv, so area <= sqrt(3)/4 rv^2
   each) whose outer edges run along every wall (the fence: robots touching the walls, at
   most rv apart, at least 3 around an obstacle). A planar triangulation of a region with h
@@ -36,7 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from world.config import load_config  # noqa: E402
-from world.groundtruth import ideal_count  # noqa: E402
+from world.groundtruth import euler_bound, ideal_count, ring_lengths  # noqa: E402,F401
 from world.maps import build_map  # noqa: E402
 
 TRI = math.sqrt(3) / 2
@@ -44,25 +45,12 @@ TRI = math.sqrt(3) / 2
 
 def _ring_lengths(wm) -> list[float]:
     """Length (m) of the boundary ring and of each obstacle ring."""
-    out = []
-    for ring in [wm.boundary] + list(wm.obstacles):
-        ring = np.asarray(ring, float)
-        out.append(float(np.sum(np.linalg.norm(np.roll(ring, -1, axis=0) - ring, axis=1))))
-    return out
+    return ring_lengths(wm)
 
 
 def _ideal(wm, d: float) -> int:
     """summary.json's baseline: the tessellation count of spacing d (area formula, rounded)."""
     return int(round(ideal_count(wm, d)["area_formula"]))
-
-
-def euler_bound(wm, rv: float) -> dict:
-    """Lower bound on the robots of a swarm whose Rips triangles tile the free area."""
-    b = sum(max(3, math.ceil(length / rv - 1e-9)) for length in _ring_lengths(wm))
-    h = len(wm.obstacles)
-    triangles = wm.free_area / (TRI / 2 * rv * rv)
-    return dict(robots=math.ceil((triangles + b + 2 - 2 * h) / 2), boundary_vertices=b,
-                holes=h, triangles=triangles)
 
 
 def wall_length(wm) -> float:

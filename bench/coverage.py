@@ -8,8 +8,11 @@ object as the last line.
     python bench/coverage.py                       # all configs, distributed
     python bench/coverage.py configs/small.toml --inproc --seeds 0 1 2
 
-Targets (issue 6): coverage >= 99.5% everywhere; ratio_same_spacing <= 1.10 (open_room),
-<= 1.15 (structured); ratio <= 1.35 (open_room); cycles <= 0.5 x robots used.
+Targets (issue 19, against the Euler lower bound ``euler_bound`` that summary.json reports
+for every run): certified with ground-truth coverage >= 99.5%; robots_used <= 1.25 x
+euler_bound; simulated time per robot used <= 5 s. Issue 6's (ratio_same_spacing <= 1.10
+open_room, <= 1.15 structured; ratio <= 1.35 open_room; cycles <= 0.5 x robots) are printed
+per run too. The last table has one row per config and seed, each target marked ok/MISS.
 """
 from __future__ import annotations
 
@@ -44,7 +47,10 @@ def run_inproc(config: str, seed: int, timeout: float) -> dict:
     from swarmcover.run import compute_summary
     from swarmcover.simloop import SimLoop
     from world.config import load_config
+    from swarmcover.run import default_robots_max
+    from world.maps import build_map
     cfg = load_config(config)
+    cfg, _, limits = default_robots_max(cfg, build_map(cfg), "")  # as `run` does
     sim = SimLoop(cfg, seed=seed)
     t0 = time.monotonic()
     res = sim.run(max_sim_s=20_000, max_wall_s=timeout)
@@ -53,15 +59,62 @@ def run_inproc(config: str, seed: int, timeout: float) -> dict:
                   y=[res.positions[r][1] for r in ids], theta=[0.0] * len(ids),
                   live=[False] * len(ids), t=res.sim_time_s)
     extra = dict(certified=res.certified, cycles=res.cycles, sim_time_s=res.sim_time_s,
+                 stop_reason=_inproc_reason(res), stop_detail=res.stop_reason,
                  wall_time_s=time.monotonic() - t0, robots_spawned=res.robots_spawned,
                  failures_healed=res.deployer.failures_healed, config=config, seed=seed,
-                 mode="inproc")
+                 mode="inproc", **limits)
     return compute_summary(cfg, sim.wm, truth, res.final, extra)
+
+
+ROBOTS_PER_BOUND_MAX = 1.25
+SIM_S_PER_ROBOT_MAX = 5.0
+
+
+def targets(s: dict) -> dict:
+    """Issue 19's verdicts for one run: name -> (value text, ok)."""
+    cov = s.get("coverage") or 0.0
+    used, bound = s.get("robots_used") or 0, s.get("euler_bound")
+    rpb = used / bound if bound else None           # also when not certified, for the table
+    spr = s.get("sim_s_per_robot")
+    return {
+        "certified, coverage >= 99.5%": (f"{'yes' if s.get('certified') else 'no'}, "
+                                         f"{100 * cov:.2f}%",
+                                         bool(s.get("certified")) and cov >= 0.995),
+        f"robots / bound <= {ROBOTS_PER_BOUND_MAX}": (
+            f"{used} / {bound} = {rpb:.2f}" if rpb is not None else "-",
+            bool(s.get("certified")) and rpb is not None and rpb <= ROBOTS_PER_BOUND_MAX),
+        f"sim s / robot <= {SIM_S_PER_ROBOT_MAX:g}": (
+            f"{spr:.1f}" if spr is not None else "-",
+            spr is not None and spr <= SIM_S_PER_ROBOT_MAX),
+    }
+
+
+def table(results: list[dict]) -> str:
+    """One markdown table over configs and seeds, targets marked ok/MISS."""
+    heads = list(targets({}).keys())
+    lines = ["| config | seed | stop | " + " | ".join(heads) + " | cycles |",
+             "|---|---|---|" + "---|" * len(heads) + "---|"]
+    for s in results:
+        t = targets(s)
+        cells = [f"{v} {'ok' if ok else 'MISS'}" for v, ok in t.values()]
+        lines.append(f"| {s.get('name')} | {s.get('seed')} | {s.get('stop_reason', '-')} | "
+                     + " | ".join(cells) + f" | {s.get('cycles')} |")
+    return "\n".join(lines)
+
+
+def _inproc_reason(res) -> str:
+    """summary.json's stop_reason for an in-process run."""
+    why = res.stop_reason or ""
+    if res.certified:
+        return "certified"
+    if why.startswith("max_wall_s"):
+        return "wall_timeout"
+    return "robots_max" if "robots_max" in why else "no_progress"
 
 
 def check(name: str, s: dict) -> list[str]:
     """Target verdicts for one run, as text."""
-    out = []
+    out = [f"{k}: {v} ({'ok' if ok else 'MISS'})" for k, (v, ok) in targets(s).items()]
     cov = s.get("coverage", 0.0)
     out.append(f"coverage {100 * cov:.2f}% ({'ok' if cov >= 0.995 else 'MISS'} >= 99.5%)")
     rs = s.get("ratio_same_spacing")
@@ -70,8 +123,9 @@ def check(name: str, s: dict) -> list[str]:
         out.append(f"ratio_same_spacing {rs:.2f}" + (f" ({'ok' if rs <= lim else 'MISS'} <= {lim})"
                                                        if lim else ""))
     r = s.get("ratio")
-    out.append(f"ratio {r:.2f}" + (f" ({'ok' if r <= 1.35 else 'MISS'} <= 1.35)"
-                                   if name == "open_room" else ""))
+    if r is not None:
+        out.append(f"ratio {r:.2f}" + (f" ({'ok' if r <= 1.35 else 'MISS'} <= 1.35)"
+                                       if name == "open_room" else ""))
     c, n = s.get("cycles", 0), s.get("robots_used", 0)
     out.append(f"cycles {c} vs 0.5 x robots {0.5 * n:.0f} ({'ok' if c <= 0.5 * n else 'MISS'})")
     return out
@@ -100,17 +154,23 @@ def main(argv=None) -> int:
                 with tempfile.TemporaryDirectory() as d:
                     s = run_distributed(config, seed, Path(d) / "run", args.timeout)
             s["name"] = name
+            s.setdefault("seed", seed)
             results.append(s)
-            print(f"  {name} seed {seed}: certified={s['certified']} robots_used={s['robots_used']} "
+            ms = s.get("mean_spacing")
+            print(f"  {name} seed {seed}: certified={s['certified']} ({s.get('stop_reason')}) "
+                  f"robots_used={s['robots_used']} euler_bound={s.get('euler_bound')} "
                   f"ideal={s['ideal_count']} ideal_same_spacing={s.get('ideal_count_same_spacing')} "
-                  f"mean_spacing={s['mean_spacing']:.3f} cycles={s['cycles']} "
+                  f"mean_spacing={'-' if ms is None else f'{ms:.3f}'} cycles={s['cycles']} "
                   f"sim={s['sim_time_s']:.0f}s wall={s['wall_time_s']:.0f}s", flush=True)
             for line in check(name, s):
                 print(f"    {line}", flush=True)
-    keys = ("name", "seed", "certified", "robots_used", "ideal_count", "ratio", "mean_spacing",
-            "ideal_count_same_spacing", "ratio_same_spacing", "coverage", "cycles", "sim_time_s",
-            "wall_time_s", "mode")
-    print(json.dumps({"bench": "coverage", "runs": [{k: s.get(k) for k in keys} for s in results]}))
+    keys = ("name", "seed", "certified", "stop_reason", "robots_used", "euler_bound",
+            "robots_per_bound", "sim_s_per_robot", "ideal_count", "ratio", "mean_spacing",
+            "ideal_count_same_spacing", "ratio_same_spacing", "coverage", "false_certificate",
+            "uncovered_reachable_m2", "cycles", "sim_time_s", "wall_time_s", "mode")
+    print(table(results), flush=True)
+    from swarmcover.run import strict_json
+    print(strict_json({"bench": "coverage", "runs": [{k: s.get(k) for k in keys} for s in results]}))
     return 0
 
 

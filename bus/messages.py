@@ -412,6 +412,8 @@ class Complex(Message):
     edges: flat vertex-id pairs [a0, b0, a1, b1, ...]; triangles: flat triples.
     frontier/obstacle: indices into the edge list. redundant: vertex ids.
     state: "running", "certified" (K empty and certificate holds) or "stopped".
+    failures_healed: robot failures whose holes this coordinator has refilled so far;
+    reason: why it stopped (state "stopped"), e.g. "robots_max = 40 reached".
     """
     cycle: int = f_int(0)
     t: float = f_float(0.0)
@@ -427,6 +429,8 @@ class Complex(Message):
     certified: bool = f_bool()
     robots: int = f_int(0)
     state: str = f_str(("running", "certified", "stopped"), default="running")
+    failures_healed: int = f_int(0)
+    reason: str = f_str(maxlen=200)
 
     def _post_check(self):
         if len(self.vertices) != len(self.occupants):

@@ -487,7 +487,8 @@ class Deployer:
             frontier=list(plan.frontier), obstacle=list(plan.obstacle),
             redundant=sorted(plan.redundant), sources=list(snap.sources),
             certified=bool(plan.complete),
-            robots=sum(1 for r in self.robots.values() if r.alive and not r.dead), state=state)
+            robots=sum(1 for r in self.robots.values() if r.alive and not r.dead), state=state,
+            failures_healed=self.failures_healed, reason=self.stop_reason[:200])
 
     # ------------------------------------------------------------------ jobs
     def _make_job(self, spec: JobSpec) -> PushJob:

@@ -20,6 +20,7 @@ from bus.keys import Keys
 from bus.messages import Clock, Complex, Status, WorldInfo
 from bus.session import (Mailbox, Receiver, Shutdown, add_zenoh_args, keys_from_args,
                          open_session, publisher, setup_logging)
+from bus.trust import SignedPublisher, key_from_env
 
 from .config import CoordinatorConfig
 from .deployer import Deployer
@@ -117,13 +118,15 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
         session.liveliness().declare_subscriber(keys.alive_robots(), mb.callback, history=True),
     ]
     token = session.liveliness().declare_token(keys.alive("coordinator", "main"))
-    pub_complex = publisher(session, keys.complex)
-    pub_spawn = publisher(session, keys.spawn)
+    # signed (bus.trust): run accepts a Complex or a Spawn only from this session
+    run_key = key_from_env()
+    pub_complex = SignedPublisher(publisher(session, keys.complex), run_key)
+    pub_spawn = SignedPublisher(publisher(session, keys.spawn), run_key)
     pub_remove = publisher(session, keys.remove)
     task_pubs: dict[int, zenoh.Publisher] = {}
     now = 0.0
     clocked = False
-    print(f"READY coordinator epoch {epoch}", flush=True)
+    print(f"READY coordinator epoch {epoch} zid {session.zid()}", flush=True)
     log.info("coordinator up: swarm %s, rv %.2f, %d source(s), push_mode %s", keys.swarm,
              ccfg.rv, len(headings), ccfg.push_mode)
     rc = 0

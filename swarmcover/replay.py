@@ -144,7 +144,8 @@ class Replayer:
         pub = self._pubs.get(key)
         if pub is None:
             from bus.session import publisher
-            pub = publisher(self.session, key, block=True)
+            from bus.trust import SignedPublisher  # source_info, so viewers take its Complex
+            pub = SignedPublisher(publisher(self.session, key, block=True), None)
             self._pubs[key] = pub
         return pub
 

@@ -4,8 +4,10 @@ Starts an embedded Zenoh router, the world, the coordinator and (as the coordina
 for robots) one agent process per robot; plus the hardware bridge and stand-in live robots
 when the config has a ``[hwbridge]`` section. It shows live progress, and at the end writes
 a run folder (``summary.json``, ``final.png``, ``cycles.jsonl``, ``resolved.toml``,
-``logs/``, and ``run.mcap`` with ``--record``). Exit status 0 if and only if coverage was
-certified. Ctrl-C stops everything cleanly; a killed ``run`` takes its children with it
+``logs/``, and ``run.mcap`` with ``--record``). Exit status: 0 certified; 1 ran, not
+certified (wall timeout, robots_max, no progress); 2 a config or usage error (also one an
+agent or the coordinator reports at start); 3 a part failed (the world died, agents failed
+at start, an error); 130 interrupted. summary.json is written on every ending. Ctrl-C stops everything cleanly; a killed ``run`` takes its children with it
 (they watch their parent).
 
 CONFIG may be a TOML run config or a bare ROS map_server YAML (defaults are built around it).
@@ -31,7 +33,8 @@ import zenoh
 
 from bus.keys import Keys
 from bus.messages import Complex, Spawn, Truth, WorldInfo
-from bus.session import Mailbox, Receiver, Shutdown, add_zenoh_args, open_session, setup_logging
+from bus.session import Receiver, Shutdown, add_zenoh_args, open_session, setup_logging
+from bus.trust import KEY_ENV, new_key, sample_origin, verify
 
 log = logging.getLogger("swarmcover.run")
 MAX_COORDINATOR_RESTARTS = 3
@@ -54,7 +57,8 @@ class Child:
     def alive(self) -> bool:
         return self.p.poll() is None
 
-    def wait_ready(self, needle: str, timeout: float) -> None:
+    def wait_ready(self, needle: str, timeout: float) -> str:
+        """Wait for a log line containing ``needle`` (after this start); returns that line."""
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             try:
@@ -64,7 +68,7 @@ class Child:
             except OSError:
                 text = ""
             if needle in text:
-                return
+                return next(ln for ln in text.splitlines() if needle in ln)
             if self.p.poll() is not None:
                 break
             time.sleep(0.05)
@@ -90,9 +94,10 @@ class Launcher:
         self.children: dict[str, Child] = {}
         self.env = dict(os.environ, SWARMCOVER_WATCH_PARENT="1", PYTHONUNBUFFERED="1")
 
-    def start(self, name: str, args: list[str], zenoh_args: bool = True) -> Child:
+    def start(self, name: str, args: list[str], zenoh_args: bool = True,
+              env: dict | None = None) -> Child:
         argv = PY + args + (self.zargs if zenoh_args else [])
-        c = self.children[name] = Child(name, argv, self.logdir, self.env)
+        c = self.children[name] = Child(name, argv, self.logdir, dict(self.env, **(env or {})))
         return c
 
     def stop_all(self, order: list[str] | None = None, grace: float = 8.0) -> None:
@@ -159,9 +164,20 @@ def resolve_config(path: str, args) -> tuple[object, str]:
 
 # --------------------------------------------------------------------------- metrics
 
+# exit codes: 0 certified; 1 ran, not certified; 2 config or usage error; 3 a part failed
+EXIT_NOT_CERTIFIED, EXIT_USAGE, EXIT_FAILED, EXIT_INTERRUPTED = 1, 2, 3, 130
+STOP_REASONS = ("certified", "wall_timeout", "interrupted", "robots_max", "no_progress",
+                "world_died", "agents_failed", "error")
+FALSE_CERT_M2 = 0.005          # x rv^2: uncovered reachable area above this is a false certificate
+STOPPING_GATES = ("no_command", "command_stale", "no_mocap", "mocap_stale", "geofence")
+
+
 def compute_summary(cfg, wmap, truth: Truth | None, cx: Complex | None, extra: dict) -> dict:
-    """Ground-truth numbers for summary.json (world positions, never seen by the swarm)."""
-    from world.groundtruth import coverage_fraction, ideal_count
+    """Ground-truth numbers for summary.json (world positions, never seen by the swarm).
+
+    Ratios (ratio, ratio_same_spacing, robots_per_bound) are null unless certified; every
+    value is finite or null (the summary is strict JSON)."""
+    from world.groundtruth import coverage_fraction, euler_bound, ideal_count, reachable_uncovered
     rv = cfg.rv
     pos = {}
     if truth is not None:
@@ -171,7 +187,8 @@ def compute_summary(cfg, wmap, truth: Truth | None, cx: Complex | None, extra: d
         members = [o for o in cx.occupants if o >= 0 and o in pos]
     all_alive = [i for i in pos]
     P = np.array([pos[i] for i in all_alive], float).reshape(-1, 2)
-    coverage = float(coverage_fraction(wmap, P, rv)) if len(P) else 0.0
+    coverage, covered, raster = coverage_fraction(wmap, P, rv, return_mask=True)
+    coverage = float(coverage) if len(P) else 0.0
     lengths = []
     if cx is not None:
         occ = dict(zip(cx.vertices, cx.occupants))
@@ -179,28 +196,87 @@ def compute_summary(cfg, wmap, truth: Truth | None, cx: Complex | None, extra: d
             ra, rb = occ.get(a, -1), occ.get(b, -1)
             if ra in pos and rb in pos:
                 lengths.append(math.dist(pos[ra], pos[rb]))
-    mean_spacing = float(np.mean(lengths) / rv) if lengths else float("nan")
-    ideal = ideal_count(wmap, rv)
-    ideal_n = _ideal_number(ideal)
+    mean_spacing = float(np.mean(lengths) / rv) if lengths else None
+    ideal_n = _ideal_number(ideal_count(wmap, rv))
     robots_used = len(members) if members else len(all_alive)
+    certified = bool(extra.get("certified", False))
+    bound = euler_bound(wmap, rv)["robots"]
+    sim_t = extra.get("sim_time_s")
     out = dict(
-        certified=bool(extra.get("certified", False)),
+        certified=certified,
+        stop_reason=extra.get("stop_reason") or ("certified" if certified else "error"),
+        coverage=coverage,
         robots_used=robots_used,
         robots_spawned=extra.get("robots_spawned", len(all_alive)),
         ideal_count=ideal_n,
-        ratio=robots_used / ideal_n if ideal_n else float("nan"),
+        ratio=robots_used / ideal_n if ideal_n and certified else None,
+        euler_bound=bound,
+        robots_per_bound=robots_used / bound if certified and bound else None,
+        sim_s_per_robot=(sim_t / robots_used if sim_t is not None and robots_used else None),
         mean_spacing=mean_spacing,
     )
-    if lengths:
-        same = ideal_count(wmap, mean_spacing * rv)
-        out["ideal_count_same_spacing"] = _ideal_number(same)
-        out["ratio_same_spacing"] = robots_used / out["ideal_count_same_spacing"]
+    if lengths and mean_spacing:
+        same = _ideal_number(ideal_count(wmap, mean_spacing * rv))
+        out["ideal_count_same_spacing"] = same
+        out["ratio_same_spacing"] = robots_used / same if certified and same else None
     else:
         out["ideal_count_same_spacing"] = None
         out["ratio_same_spacing"] = None
-    out["coverage"] = coverage
+    # ground truth of the claim (issue 21): reachable free area that nobody covers
+    reach = dict(uncovered_reachable_m2=0.0, where=None)
+    if len(wmap.sources):
+        for src in wmap.sources:
+            r = reachable_uncovered(wmap, covered, raster, src[:2], cfg.robots.radius, rv)
+            if r["uncovered_reachable_m2"] > reach["uncovered_reachable_m2"]:
+                reach = r
+    out["uncovered_reachable_m2"] = reach["uncovered_reachable_m2"]
+    out["false_certificate"] = bool(certified and reach["uncovered_reachable_m2"]
+                                    > FALSE_CERT_M2 * rv * rv)
+    if out["false_certificate"]:
+        out["false_certificate_where"] = reach["where"]
+    out["inferred_obstacle_edges"] = _inferred_edges(cx, pos)
     out.update({k: v for k, v in extra.items() if k not in out})
     return out
+
+
+def _inferred_edges(cx: Complex | None, pos: dict) -> list[dict] | None:
+    """Obstacle edges the coordinator closed by inference (Complex.inferred, when the
+    coordinator sends it), with their ground-truth length; None when it does not."""
+    idx = getattr(cx, "inferred", None) if cx is not None else None
+    if idx is None:
+        return None
+    why = list(getattr(cx, "inferred_why", None) or [])
+    occ = dict(zip(cx.vertices, cx.occupants))
+    out = []
+    for n, k in enumerate(idx):
+        if not 0 <= k < len(cx.edges) // 2:
+            continue
+        a, b = cx.edges[2 * k], cx.edges[2 * k + 1]
+        ra, rb = occ.get(a, -1), occ.get(b, -1)
+        length = math.dist(pos[ra], pos[rb]) if ra in pos and rb in pos else None
+        out.append(dict(a=a, b=b, length_m=length, why=why[n] if n < len(why) else ""))
+    return out
+
+
+def strict_json(obj, **kw) -> str:
+    """JSON with every non-finite float as null and numpy scalars as numbers; never NaN."""
+    return json.dumps(_finite(obj), allow_nan=False, **kw)
+
+
+def _finite(o):
+    if isinstance(o, dict):
+        return {str(k): _finite(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_finite(v) for v in o]
+    if isinstance(o, (bool, np.bool_)):
+        return bool(o)
+    if isinstance(o, (int, np.integer)):
+        return int(o)
+    if isinstance(o, (float, np.floating)):
+        return float(o) if math.isfinite(o) else None
+    if o is None or isinstance(o, str):
+        return o
+    return str(o)
 
 
 def _ideal_number(ideal) -> int:
@@ -209,6 +285,37 @@ def _ideal_number(ideal) -> int:
             if k in ideal:
                 return int(round(ideal[k]))
     return int(round(float(ideal)))
+
+
+def twin_tracking(report: dict) -> dict:
+    """A mixed run's twin tracking, per live robot, from the bridge's report (hwbridge.json):
+    mean and p95 position error (m), lag (s), and the stops its safety gate made."""
+    out = {}
+    gates = report.get("gate_decisions") or {}
+    for rid, r in (report.get("robots") or {}).items():
+        pe = r.get("position_error_m") or {}
+        g = gates.get(rid) or {}
+        out[rid] = dict(position_error_mean_m=pe.get("mean"), position_error_p95_m=pe.get("p95"),
+                        lag_s=r.get("lag_s"),
+                        stops=sum(int(g.get(k, 0)) for k in STOPPING_GATES),
+                        stops_by_reason={k: int(g[k]) for k in STOPPING_GATES if g.get(k)})
+    return out
+
+
+def default_robots_max(cfg, wmap, resolved: str) -> tuple[object, str, dict]:
+    """Without an explicit robots_max ([coordinator] or --robots-max), the cap scales with the
+    map: ceil(3 x the Euler lower bound). Returns (cfg, resolved TOML, how it was set)."""
+    from world.config import to_toml
+    from world.groundtruth import ROBOTS_MAX_PER_BOUND, default_robots_max as dflt, euler_bound
+    coord = dict(cfg.sections.get("coordinator", {}) or {})
+    bound = euler_bound(wmap, cfg.rv)["robots"]
+    if "robots_max" in coord:
+        return cfg, resolved, dict(robots_max=coord["robots_max"], robots_max_from="config")
+    n = dflt(wmap, cfg.rv)
+    coord["robots_max"] = n
+    cfg = dataclasses.replace(cfg, sections=dict(cfg.sections, coordinator=coord))
+    return cfg, to_toml(cfg), dict(
+        robots_max=n, robots_max_from=f"map: ceil({ROBOTS_MAX_PER_BOUND:g} x Euler bound {bound})")
 
 
 # --------------------------------------------------------------------------- main
@@ -244,6 +351,89 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+@dataclasses.dataclass
+class RunState:
+    """What the supervisor learnt; the report is written from it on every ending."""
+    stop_reason: str = ""
+    detail: str = ""
+    rc: int | None = None
+    certified: bool = False
+    last_cx: Complex | None = None
+    last_truth: Truth | None = None
+    info: WorldInfo | None = None
+    spawned: int = 0
+    restarts: int = 0
+    epochs: dict = dataclasses.field(default_factory=dict)   # epoch -> [last cycle, healed]
+    refused: dict = dataclasses.field(default_factory=dict)  # "complex: why" -> count
+    recheck: dict | None = None
+    limits: dict = dataclasses.field(default_factory=dict)   # robots_max and where from
+
+    def end(self, reason: str, detail: str = "", rc: int | None = None) -> bool:
+        """Record why the run ends (the first reason wins)."""
+        if self.stop_reason:
+            return False
+        assert reason in STOP_REASONS, reason
+        self.stop_reason, self.detail = reason, detail
+        self.certified = reason == "certified"
+        self.rc = rc if rc is not None else (0 if self.certified else EXIT_NOT_CERTIFIED)
+        return True
+
+    def refuse(self, what: str, why: str) -> None:
+        k = f"{what}: {why}"
+        if k not in self.refused:
+            log.warning("refused a %s: %s", what, why)
+        self.refused[k] = self.refused.get(k, 0) + 1
+
+    def on_cycle(self, cx: Complex) -> int:
+        """Cycles across coordinator restarts (each restart has its own epoch and counts
+        from 0): a finished epoch counts its last planned cycle + 1."""
+        c, h = self.epochs.get(cx.epoch, (cx.cycle, cx.failures_healed))
+        self.epochs[cx.epoch] = [max(c, cx.cycle), max(h, cx.failures_healed)]
+        return self.cycles
+
+    @property
+    def cycles(self) -> int:
+        eps = list(self.epochs.values())
+        return sum(c + 1 for c, _ in eps[:-1]) + (eps[-1][0] if eps else 0)
+
+    @property
+    def failures_healed(self) -> int:
+        return sum(h for _, h in self.epochs.values())
+
+
+class StallWatch:
+    """Ends a run that can no longer progress. Progress is a vertex id never seen before (a
+    robot placed), fewer frontier edges than ever, or more obstacle edges than ever. With
+    the swarm at robots_max, ``at_cap`` cycles without progress end it (robots_max); below,
+    ``stall`` cycles (no_progress). A restarted coordinator (new epoch) starts afresh."""
+
+    def __init__(self, robots_max: int, at_cap: int = 5, stall: int = 60):
+        self.robots_max, self.at_cap, self.stall = robots_max, at_cap, stall
+        self.epoch = None
+
+    def on_complex(self, cx: Complex) -> tuple[str, str] | None:
+        if cx.epoch != self.epoch:
+            self.epoch, self.seen, self.last = cx.epoch, set(cx.vertices), cx.cycle
+            self.min_f, self.max_o = len(cx.frontier), len(cx.obstacle)
+            return None
+        new = set(cx.vertices) - self.seen
+        if new or len(cx.frontier) < self.min_f or len(cx.obstacle) > self.max_o:
+            self.last = cx.cycle
+        self.seen |= new
+        self.min_f = min(self.min_f, len(cx.frontier))
+        self.max_o = max(self.max_o, len(cx.obstacle))
+        idle = cx.cycle - self.last
+        if cx.state != "running" or not cx.frontier:
+            return None
+        if cx.robots >= self.robots_max and idle >= self.at_cap:
+            return "robots_max", (f"robots_max = {self.robots_max} reached and {idle} cycles "
+                                  f"without progress ({len(cx.frontier)} frontier edges left)")
+        if idle >= self.stall:
+            return "no_progress", (f"{idle} cycles without a new robot placed or the fence "
+                                   f"closing ({len(cx.frontier)} frontier edges left)")
+        return None
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     setup_logging(args.log_level, "swarmcover.run")
@@ -253,6 +443,7 @@ def main(argv: list[str] | None = None) -> int:
         cfg, resolved = resolve_config(args.config, args)
         from world.maps import build_map
         wmap = build_map(cfg)
+        cfg, resolved, limits = default_robots_max(cfg, wmap, resolved)
         live_limits = _live_limits(cfg, resolved, str(args.config))
     except (ValueError, OSError) as e:
         print(f"swarmcover run: {e}", file=sys.stderr)
@@ -272,8 +463,8 @@ def main(argv: list[str] | None = None) -> int:
     zargs = ["--connect", endpoint, "--swarm", swarm]
     launcher = Launcher(logdir, zargs)
     t_wall0 = time.monotonic()
-    state = dict(certified=False, reason="")
-    rc = 1
+    state = RunState(limits=limits)
+    summary: dict = {}
     with Shutdown(grace_s=0) as stop:  # a supervisor: stop_all bounds its own exit
         session = None
         try:
@@ -284,26 +475,77 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr, flush=True)
             launcher.start("world", ["world", conf_path]).wait_ready("READY world", 60)
             session = _open(endpoint, swarm)
-            rc = _supervise(args, cfg, wmap, conf_path, launcher, session, Keys(swarm), out,
-                            stop, state, t_wall0, live_limits)
-        except RuntimeError as e:
+            _supervise(args, cfg, wmap, conf_path, launcher, session, Keys(swarm), out,
+                       stop, state, t_wall0, live_limits)
+        except RuntimeError as e:  # a part did not start
             log.error("%s", e)
-            state["reason"] = str(e).splitlines()[0]
-            rc = 1
+            w = launcher.children.get("world")
+            wrc = w.p.poll() if w is not None else None
+            if wrc == EXIT_USAGE:   # the world refused the config
+                state.end("error", f"the world exited at start (exit 2): "
+                          f"{_first_error(w.log_path)}", EXIT_USAGE)
+            elif wrc is not None:
+                state.end("world_died", str(e).splitlines()[0], EXIT_FAILED)
+            else:
+                state.end("error", str(e).splitlines()[0], EXIT_FAILED)
         except KeyboardInterrupt:
-            rc = 130
+            state.end("interrupted", "Ctrl-C", EXIT_INTERRUPTED)
+        except Exception as e:  # a bug in run itself: still stop everything and report
+            log.exception("run failed")
+            state.end("error", f"{type(e).__name__}: {e}", EXIT_FAILED)
         finally:
             if stop.is_set() and stop.signum in (signal.SIGINT, signal.SIGTERM):
                 print("\nswarmcover run: interrupted, stopping every process ...",
                       file=sys.stderr, flush=True)
-                rc = 130
+                state.end("interrupted", f"signal {stop.signum}", EXIT_INTERRUPTED)
             if session is not None:
                 session.close()
             launcher.stop_all(order=["hwbridge", "coordinator", "world", "router"])
-    print(f"swarmcover run: {'CERTIFIED' if state['certified'] else 'NOT certified'}"
-          f"{' (' + state['reason'] + ')' if state['reason'] else ''}; report in {out}/",
+            state.end("error", "the run ended without a reason", EXIT_FAILED)
+            try:
+                summary = _write_report(args, cfg, wmap, out, state, t_wall0)
+            except OSError as e:
+                log.error("could not write %s: %s", out / "summary.json", e)
+    warn = ""
+    if summary.get("false_certificate"):
+        warn = (f" -- WARNING: FALSE CERTIFICATE: ground truth shows "
+                f"{summary['uncovered_reachable_m2']:.2f} m^2 of reachable free area uncovered "
+                f"(at {summary.get('false_certificate_where')})")
+    print(f"swarmcover run: {'CERTIFIED' if state.certified else 'NOT certified'} "
+          f"({state.stop_reason}{': ' + state.detail if state.detail else ''}); "
+          f"coverage {100 * summary.get('coverage', 0.0):.1f}%{warn}; report in {out}/",
           file=sys.stderr, flush=True)
-    return rc
+    return state.rc
+
+
+def _write_report(args, cfg, wmap, out: Path, state: RunState, t_wall0: float) -> dict:
+    """summary.json (strict JSON, on every ending) and final.png; returns the summary."""
+    truth, cx = state.last_truth, state.last_cx
+    extra = dict(certified=state.certified, stop_reason=state.stop_reason,
+                 stop_detail=state.detail, cycles=state.cycles,
+                 sim_time_s=(truth.t if truth else 0.0),
+                 wall_time_s=time.monotonic() - t_wall0, robots_spawned=state.spawned,
+                 failures_healed=state.failures_healed, coordinator_restarts=state.restarts,
+                 certificate_recheck=state.recheck,
+                 refused_messages=dict(sorted(state.refused.items())),
+                 exit_code=state.rc, config=str(args.config), seed=cfg.world.seed,
+                 mode=cfg.world.mode, **state.limits)
+    try:
+        rep = json.loads((out / "hwbridge.json").read_text())
+        extra["twin_tracking"] = twin_tracking(rep)
+    except (OSError, ValueError):
+        pass
+    try:
+        summary = compute_summary(cfg, wmap, truth, cx, extra)
+    except Exception as e:  # the summary must survive a failed metric
+        log.exception("could not compute the ground-truth metrics")
+        summary = dict(extra, metrics_error=f"{type(e).__name__}: {e}")
+    text = strict_json(summary, indent=2)
+    (out / "summary.json").write_text(text + "\n")
+    if state.info is not None:
+        _final_png(state.info, out, truth, cx, cfg)
+    print(strict_json(summary), flush=True)
+    return summary
 
 
 def _open(endpoint: str, swarm: str) -> zenoh.Session:
@@ -314,13 +556,18 @@ def _open(endpoint: str, swarm: str) -> zenoh.Session:
 
 def _agent_args(spawn: Spawn, conf_path: str, live_limits: dict) -> list[str]:
     """A live robot's agent plans with the robot's own limits ([[hwbridge.robots]]), so the
-    bridge's clamp does not rescale its turns behind its back."""
+    bridge's clamp does not rescale its turns behind its back. Env
+    SWARMCOVER_AGENT_EXTRA_ARGS adds arguments to every agent (e.g. ``--log-level DEBUG``)."""
     a = ["agent", "--id", str(spawn.robot), "--kind", spawn.kind, "--run-config", conf_path]
     if spawn.live:
         a.append("--live")
         if spawn.robot in live_limits:
             v_max, w_max = live_limits[spawn.robot]
             a += ["--v-max", str(v_max), "--param", f"w_max={float(w_max)}"]
+    extra = os.environ.get("SWARMCOVER_AGENT_EXTRA_ARGS", "").strip()
+    if extra:
+        import shlex
+        a += shlex.split(extra)
     return a
 
 
@@ -334,25 +581,96 @@ def _live_limits(cfg, resolved: str, where: str) -> dict:
     return {r.id: (r.v_max, r.w_max) for r in loads(resolved, where).robots}
 
 
-def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Keys, out: Path,
-               stop: Shutdown, state: dict, t_wall0: float, live_limits: dict) -> int:
-    from swarmcover.progress import Progress
-    rx = Receiver(log)
-    mb = Mailbox()
-    subs = [session.declare_subscriber(keys.spawn, mb.callback),
-            session.declare_subscriber(keys.complex, mb.callback),
-            session.declare_subscriber(keys.truth, mb.callback)]
-    recorder = None
-    last_cx: Complex | None = None
-    last_truth: Truth | None = None
-    cycles_f = open(out / "cycles.jsonl", "w")
-    spawned = 0
-    progress = Progress(label=cfg.name, enabled=not args.quiet, every_s=10.0)
-    restarts = 0
-    coverage = 0.0
-    final_state = None
-    from world.groundtruth import coverage_fraction
+class _Inbox:
+    """Zenoh callbacks -> one queue of (key, payload, kind, source zid, attachment)."""
+
+    def __init__(self):
+        import queue
+        self.q: queue.Queue = queue.Queue()
+
+    def callback(self, sample: zenoh.Sample) -> None:
+        zid, att = sample_origin(sample)
+        self.q.put_nowait((str(sample.key_expr), sample.payload.to_bytes(), sample.kind, zid, att))
+
+    def items(self, timeout: float) -> list:
+        import queue
+        out = []
+        try:
+            out.append(self.q.get(timeout=timeout))
+            while len(out) < 100_000:
+                out.append(self.q.get_nowait())
+        except queue.Empty:
+            pass
+        return out
+
+
+class _Coordinator:
+    """The coordinator run started: its session id and epoch (from its READY line, read
+    from its own log), its liveliness token, and the run key its samples are signed with."""
+
+    def __init__(self, run_key: bytes):
+        self.key = run_key
+        self.zid: str | None = None
+        self.epoch: int | None = None
+        self.token = False
+
+    def started(self, ready_line: str) -> None:
+        parts = ready_line.split()
+        self.zid = parts[parts.index("zid") + 1] if "zid" in parts else None
+        self.epoch = int(parts[parts.index("epoch") + 1]) if "epoch" in parts else None
+
+    def check(self, key_expr: str, payload: bytes, zid: str | None, att: bytes | None) -> str:
+        """Why a sample is not the coordinator's ("" if it is)."""
+        if self.zid is None or zid != self.zid:
+            return "not from the coordinator's session"
+        if not verify(self.key, key_expr, payload, att):
+            return "bad or missing run-key signature"
+        return ""
+
+
+def _start_coordinator(launcher: Launcher, conf_path: str, coord: _Coordinator) -> None:
+    c = launcher.start("coordinator", ["coordinator", conf_path],
+                       env={KEY_ENV: coord.key.hex()})
+    coord.started(c.wait_ready("READY coordinator", 60))
+
+
+def _first_error(path: Path) -> str:
+    """The first ERROR line of a log (else its last line), without the timestamp."""
     try:
+        lines = [ln for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
+    except OSError:
+        return "(no log)"
+    for ln in lines:
+        if " ERROR " in ln or ln.startswith("ERROR") or "Error:" in ln:
+            return ln.split(" ERROR ", 1)[-1].strip()[:300]
+    return ("last log line: " + lines[-1].strip()[:300]) if lines else "(empty log)"
+
+
+def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Keys, out: Path,
+               stop: Shutdown, state: RunState, t_wall0: float, live_limits: dict) -> None:
+    from coordinator.node import query_world_info
+    from swarmcover.progress import Progress
+    from swarmcover.recheck import recheck
+    from world.groundtruth import coverage_fraction
+    rx = Receiver(log)
+    inbox = _Inbox()
+    coord = _Coordinator(bytes.fromhex(new_key()))
+    subs = [session.declare_subscriber(keys.spawn, inbox.callback),
+            session.declare_subscriber(keys.complex, inbox.callback),
+            session.declare_subscriber(keys.truth, inbox.callback),
+            session.liveliness().declare_subscriber(keys.alive("coordinator", "*"),
+                                                     inbox.callback, history=True)]
+    robots_max = int(state.limits.get("robots_max") or 400)
+    spawn_cap = robots_max + 8      # live agent processes; a few more for races and refills
+    stall = StallWatch(robots_max)
+    unready: dict[str, float] = {}  # agent child name -> when we last looked for READY
+    recorder = None
+    cycles_f = open(out / "cycles.jsonl", "w")
+    progress = Progress(label=cfg.name, enabled=not args.quiet, every_s=10.0)
+    coverage = 0.0
+    pending_cert: tuple[Complex, float] | None = None   # waiting for the coordinator's token
+    try:
+        state.info = query_world_info(session, keys, 5.0)
         if args.record:
             from swarmcover.record import Recorder
             recorder = Recorder(session, keys.all, str(out / "run.mcap"))
@@ -362,91 +680,141 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
             _start_hwbridge(launcher, hw, conf_path, out)
             threading.Thread(target=lambda: stop.wait() and _halt_movers(launcher, then=()),
                              daemon=True, name="halt-live").start()  # Ctrl-C: zeros at once
-        if args.view:
-            launcher.start("view", ["view", "--port", str(args.view_port)])
+        if args.view:  # it checks the coordinator's signatures with the run key
+            launcher.start("view", ["view", "--port", str(args.view_port)],
+                           env={KEY_ENV: coord.key.hex()})
             print(f"live view: http://127.0.0.1:{args.view_port}/", file=sys.stderr, flush=True)
-        launcher.start("coordinator", ["coordinator", conf_path]).wait_ready("READY coordinator", 60)
-        while not stop.is_set():
-            item = mb.get(0.1)
-            items = ([item] if item else []) + mb.drain()
-            for key, payload, kind in items:
+        _start_coordinator(launcher, conf_path, coord)
+        last_check = 0.0
+        while not stop.is_set() and not state.stop_reason:
+            for key, payload, kind, zid, att in inbox.items(0.1):
                 rel = keys.relative(key)
-                if rel == "world/spawn":
+                if rel.startswith("alive/coordinator/"):
+                    coord.token = kind == zenoh.SampleKind.PUT
+                elif rel == "world/spawn":
                     sp = rx.decode(key, payload, Spawn)
-                    if sp is not None and f"agent-{sp.robot}" not in launcher.children:
-                        launcher.start(f"agent-{sp.robot}", _agent_args(sp, conf_path, live_limits))
-                        spawned += 1
+                    if sp is None:
+                        continue
+                    why = coord.check(key, payload, zid, att)
+                    name = f"agent-{sp.robot}"
+                    if not why and name in launcher.children:
+                        why = f"robot {sp.robot} already has an agent"
+                    if not why and sum(1 for n, c in launcher.children.items()
+                                       if n.startswith("agent-") and c.alive()) >= spawn_cap:
+                        why = f"{spawn_cap} agents running (robots_max {robots_max} + 8)"
+                    if why:
+                        state.refuse("spawn", why)
+                        continue
+                    launcher.start(name, _agent_args(sp, conf_path, live_limits))
+                    unready[name] = 0.0
+                    state.spawned += 1
                 elif rel == "world/truth":
-                    last_truth = rx.decode(key, payload, Truth) or last_truth
+                    state.last_truth = rx.decode(key, payload, Truth) or state.last_truth
                 elif rel == "coord/complex":
                     cx = rx.decode(key, payload, Complex)
                     if cx is None:
                         continue
-                    last_cx = cx
-                    if last_truth is not None and last_truth.ids:
-                        pos = np.c_[last_truth.x, last_truth.y]
-                        coverage = float(coverage_fraction(wmap, pos, cfg.rv))
-                    row = dict(cycle=cx.cycle, t=cx.t, wall=time.monotonic() - t_wall0,
-                               robots=cx.robots, vertices=len(cx.vertices),
-                               frontier=len(cx.frontier), obstacle=len(cx.obstacle),
-                               redundant=len(cx.redundant), certified=cx.certified,
-                               coverage=coverage, state=cx.state)
-                    cycles_f.write(json.dumps(row) + "\n")
+                    why = coord.check(key, payload, zid, att)
+                    if not why and coord.epoch is not None and cx.epoch != coord.epoch:
+                        why = f"epoch {cx.epoch} is not the coordinator's ({coord.epoch})"
+                    if why:
+                        state.refuse("complex", why)
+                        continue
+                    state.last_cx = cx
+                    total = state.on_cycle(cx)
+                    truth = state.last_truth
+                    if truth is not None and truth.ids:
+                        coverage = float(coverage_fraction(wmap, np.c_[truth.x, truth.y], cfg.rv))
+                    row = dict(cycle=total, coordinator_cycle=cx.cycle, epoch=cx.epoch, t=cx.t,
+                               wall=time.monotonic() - t_wall0, robots=cx.robots,
+                               vertices=len(cx.vertices), frontier=len(cx.frontier),
+                               obstacle=len(cx.obstacle), redundant=len(cx.redundant),
+                               certified=cx.certified, coverage=coverage, state=cx.state)
+                    cycles_f.write(strict_json(row) + "\n")
                     cycles_f.flush()
-                    progress.set(cx.cycle, note=(
-                        f"cycle {cx.cycle} | robots {cx.robots} | frontier {len(cx.frontier)} | "
-                        f"obstacle {len(cx.obstacle)} | covered {100 * coverage:.1f}% | "
-                        f"sim {cx.t:.0f}s"))
-                    if cx.state in ("certified", "stopped"):
-                        final_state = cx.state
-            if final_state is not None:
+                    progress.set(total, note=(
+                        f"cycle {total} | robots {cx.robots}/{robots_max} | frontier "
+                        f"{len(cx.frontier)} | obstacle {len(cx.obstacle)} | covered "
+                        f"{100 * coverage:.1f}% | sim {cx.t:.0f}s"))
+                    if cx.state == "certified":
+                        pending_cert = (cx, time.monotonic())
+                    elif cx.state == "stopped":
+                        reason = "robots_max" if "robots_max" in cx.reason else "no_progress"
+                        state.end(reason, cx.reason or "the coordinator stopped before "
+                                  "certifying (see logs/coordinator.log)")
+                    else:
+                        pending_cert = None
+                        ended = stall.on_complex(cx)
+                        if ended:
+                            state.end(*ended)
+            if pending_cert is not None and not state.stop_reason:
+                cx, since = pending_cert
+                if not coord.token:  # ask: a token event may have been missed or reordered
+                    coord.token = _token_present(session, keys)
+                if coord.token and launcher.children["coordinator"].alive():
+                    pending_cert = None
+                    pos = None
+                    if state.last_truth is not None:
+                        t = state.last_truth
+                        pos = {i: (x, y) for i, x, y in zip(t.ids, t.x, t.y)}
+                    chk = recheck(cx, pos, cfg.rv)
+                    state.recheck = chk.as_dict()
+                    if chk.ok:
+                        state.end("certified")
+                    else:
+                        state.refuse("complex", f"certificate failed run's re-check: {chk.why}")
+                        state.end("error", f"the coordinator's certificate failed run's "
+                                  f"re-check: {chk.why}", EXIT_FAILED)
+                elif time.monotonic() - since > 10.0:
+                    pending_cert = None
+                    state.refuse("complex", "certified while the coordinator's liveliness "
+                                 "token was absent")
+            if state.stop_reason:
                 break
             c = launcher.children["world"]
             if not c.alive():
-                raise RuntimeError(f"the world process exited ({c.p.returncode}); see {c.log_path}")
+                state.end("world_died", f"the world process exited ({c.p.returncode}); see "
+                          f"{c.log_path}: {_first_error(c.log_path)}", EXIT_FAILED)
+                break
+            now = time.monotonic()
+            if now - last_check >= 0.5:
+                last_check = now
+                _check_agents(launcher, unready, state)
+                if state.stop_reason:
+                    break
             c = launcher.children["coordinator"]
             if not c.alive():
+                if c.p.returncode == EXIT_USAGE:  # a config error: a restart fails the same way
+                    state.end("error", f"the coordinator exited at start (exit 2): "
+                              f"{_first_error(c.log_path)}; see {c.log_path}", EXIT_USAGE)
+                    break
                 # a coordinator rebuilds its state from the agents' statuses: restart it
-                restarts += 1
-                if restarts > MAX_COORDINATOR_RESTARTS:
-                    raise RuntimeError(f"the coordinator exited ({c.p.returncode}) "
-                                       f"{restarts} times; see {c.log_path}")
+                state.restarts += 1
+                if state.restarts > MAX_COORDINATOR_RESTARTS:
+                    state.end("error", f"the coordinator exited ({c.p.returncode}) "
+                              f"{state.restarts} times; see {c.log_path}", EXIT_FAILED)
+                    break
                 log.warning("the coordinator exited (%s): restarting it (%d/%d)",
-                            c.p.returncode, restarts, MAX_COORDINATOR_RESTARTS)
+                            c.p.returncode, state.restarts, MAX_COORDINATOR_RESTARTS)
                 c.close()
-                launcher.start("coordinator", ["coordinator", conf_path]) \
-                    .wait_ready("READY coordinator", 60)
+                coord.token = False
+                _start_coordinator(launcher, conf_path, coord)
             if time.monotonic() - t_wall0 > args.wall_timeout:
-                state["reason"] = f"wall timeout {args.wall_timeout:.0f} s"
+                state.end("wall_timeout", f"wall timeout {args.wall_timeout:.0f} s")
                 break
     finally:
         _halt_movers(launcher)
-        progress.close()
+        progress.close(note=(f"cycle {state.cycles} | {state.stop_reason or 'stopping'}"
+                             f"{': ' + state.detail if state.detail else ''}"))
         for s in subs:
             s.undeclare()
         cycles_f.close()
         if recorder is not None:
             recorder.stop()
     time.sleep(0.3)
-    for item in mb.drain():
-        if keys.relative(item[0]) == "world/truth":
-            last_truth = rx.decode(item[0], item[1], Truth) or last_truth
-    state["certified"] = final_state == "certified"
-    if final_state == "stopped":
-        state["reason"] = "the coordinator stopped before certifying (see logs/coordinator.log)"
-    extra = dict(certified=state["certified"], cycles=last_cx.cycle if last_cx else 0,
-                 sim_time_s=(last_truth.t if last_truth else 0.0),
-                 wall_time_s=time.monotonic() - t_wall0, robots_spawned=spawned,
-                 failures_healed=_failures_healed(out / "logs" / "coordinator.log"),
-                 coordinator_restarts=restarts,
-                 config=args.config, seed=cfg.world.seed, mode=cfg.world.mode)
-    if state["reason"]:
-        extra["stop_reason"] = state["reason"]
-    summary = compute_summary(cfg, wmap, last_truth, last_cx, extra)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    _final_png(session, keys, out, last_truth, last_cx, cfg)
-    print(json.dumps(summary), flush=True)
-    return 0 if state["certified"] else 1
+    for key, payload, *_ in inbox.items(0.0):
+        if keys.relative(key) == "world/truth":
+            state.last_truth = rx.decode(key, payload, Truth) or state.last_truth
 
 
 def _halt_movers(launcher: Launcher, first: tuple = ("hwbridge",),
@@ -471,25 +839,43 @@ def _halt_movers(launcher: Launcher, first: tuple = ("hwbridge",),
                 c.signal(signal.SIGKILL)
 
 
-def _failures_healed(coord_log: Path) -> int:
+def _token_present(session, keys: Keys) -> bool:
     try:
-        for line in reversed(coord_log.read_text(errors="replace").splitlines()):
-            if "done: {" in line:
-                d = line.split("done: ", 1)[1]
-                import ast
-                return int(ast.literal_eval(d).get("failures_healed", 0))
-    except (OSError, ValueError, SyntaxError):
-        pass
-    return 0
+        return any(r.ok is not None for r in session.liveliness().get(
+            keys.alive("coordinator", "*"), timeout=1.0))
+    except Exception:
+        return False
 
 
-def _final_png(session, keys: Keys, out: Path, truth, cx, cfg) -> None:
-    try:
-        from coordinator.node import query_world_info
-        from viz.figures import render_snapshot
-        info = query_world_info(session, keys, 5.0)
-        if info is None:
+def _check_agents(launcher: Launcher, unready: dict, state: RunState) -> None:
+    """An agent that exits before its READY line failed at start: the run ends with its
+    error (exit 2 for a config or usage error, its own code 2; else 3). Agents killed by a
+    signal are left to the coordinator, which refills their holes."""
+    for name in list(unready):
+        c = launcher.children[name]
+        rc = c.p.poll()
+        try:
+            with open(c.log_path, "rb") as f:
+                ready = b"READY agent" in f.read(65536)
+        except OSError:
+            ready = False
+        if ready:
+            unready.pop(name)
+            continue
+        if rc is None:
+            continue
+        unready.pop(name)
+        if rc > 0:
+            state.end("agents_failed", f"{name} exited at start (exit {rc}): "
+                      f"{_first_error(c.log_path)}; see {c.log_path}",
+                      EXIT_USAGE if rc == EXIT_USAGE else EXIT_FAILED)
             return
+        log.warning("%s ended by signal %d before it was ready", name, -rc)
+
+
+def _final_png(info, out: Path, truth, cx, cfg) -> None:
+    try:
+        from viz.figures import render_snapshot
         render_snapshot(info, truth, cx, str(out / "final.png"),
                         title=f"{cfg.name}: {'certified' if cx and cx.certified else 'not certified'}")
     except Exception as e:  # a missing figure must not lose the summary

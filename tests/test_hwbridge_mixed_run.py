@@ -57,3 +57,8 @@ def test_mixed_run_covers_with_live_stand_ins(procs, tmp_path):
         # geofence must not have held a live robot
         assert rep["gate_decisions"][rid]["geofence"] == 0, rep["gate_decisions"]
     assert rep["refused_commands"] == 0
+    # ... and the run's own summary carries them (issue 20: not only in hwbridge.json)
+    for rid in ("1", "2"):
+        tt = summary["twin_tracking"][rid]
+        assert tt["position_error_mean_m"] == rep["robots"][rid]["position_error_m"]["mean"]
+        assert tt["position_error_p95_m"] < 0.15 and tt["stops"] >= 0

@@ -77,6 +77,9 @@ def test_ctrl_c_stops_every_process(procs, tmp_path):
     assert len(pids_with(str(out))) >= 4  # router, world, coordinator, agents
     p.signal(signal.SIGINT)
     assert p.wait(40) == 130
+    # the report survives the interruption, with its reason, as strict JSON
+    s = json.loads((out / "summary.json").read_text(), parse_constant=lambda c: 1 / 0)
+    assert s["stop_reason"] == "interrupted" and s["certified"] is False and s["cycles"] >= 2
     _no_leftovers(out)
 
 
@@ -98,6 +101,10 @@ def test_killed_agents_and_coordinator_are_healed(procs, tmp_path):
     s = _summary(out)
     assert s["certified"] and s["coverage"] >= 0.99
     assert s["coordinator_restarts"] == 1
+    # cycles count across the restart (the restarted coordinator counts from 0 again)
+    rows = [json.loads(x) for x in (out / "cycles.jsonl").read_text().splitlines()]
+    assert len({r["epoch"] for r in rows}) == 2 and s["cycles"] >= 10
+    assert [r["cycle"] for r in rows] == sorted(r["cycle"] for r in rows)
     log = (out / "logs" / "coordinator.log").read_text()
     assert "robot 3 failed" in log
     assert "resuming with" in log

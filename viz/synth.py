@@ -190,7 +190,8 @@ def main(argv: list[str] | None = None) -> int:
             decl.append(qable)
             pub_truth = publisher(session, keys.truth, block=False)
             pub_clock = publisher(session, keys.clock, block=False)
-            pub_cx = publisher(session, keys.complex, block=True)
+            from bus.trust import SignedPublisher  # with source_info, as the coordinator's
+            pub_cx = SignedPublisher(publisher(session, keys.complex, block=True), None)
             decl += [pub_truth, pub_clock, pub_cx]
             lv = session.liveliness()
             decl += [lv.declare_token(keys.alive("world", "main")),

@@ -256,8 +256,12 @@ class ViewServer:
 
     def start(self) -> "ViewServer":
         k = self.keys
+        from bus.trust import CoordinatorGate  # a Complex only from the coordinator
+        gate = CoordinatorGate().attach(self.session, k.prefix)
+        self._subs.append(gate)
         for key in (k.truth, k.complex, f"{k.prefix}/robot/*/odom"):
-            self._subs.append(self.session.declare_subscriber(key, self.mailbox.callback))
+            cb = gate.wrap(self.mailbox.callback) if key == k.complex else self.mailbox.callback
+            self._subs.append(self.session.declare_subscriber(key, cb))
         self._subs.append(self.session.liveliness().declare_subscriber(
             f"{k.prefix}/alive/**", self.tokens.callback, history=True))
         self._publish(force=True)

@@ -8,6 +8,12 @@
   offsets and rotations: ``lattice_points`` = the fewest points in free space of any tried
   placement (the fewest robots an ideal lattice needs), ``lattice_points_max`` = the most.
   Reports use it at d = rv and at d = the swarm's mean edge length.
+* ``euler_bound(wm, rv)``: a lower bound on the robots of any certifiable swarm (Euler's
+  relation for a triangulation whose Rips triangles tile the free area, walls included);
+  ``default_robots_max(wm, rv)``: ``run``'s default cap, a multiple of it.
+* ``reachable_uncovered(wm, covered, raster, source, radius, rv)``: the free area a robot's
+  body can reach from the source, beyond 0.5 rv from any wall, that no robot covers (the
+  ground-truth test of a certificate).
 
 World frame, metres. Pure functions over numpy; the map's rasters are cached on it.
 """
@@ -66,6 +72,88 @@ def coverage_fraction(wm: WorldMap, positions, rv: float, cell: float | None = N
     if return_mask:
         return frac, covered, r
     return frac
+
+
+TRI = math.sqrt(3) / 2
+ROBOTS_MAX_PER_BOUND = 3.0     # run's default robots_max = ceil(this x the Euler bound)
+
+
+def ring_lengths(wm: WorldMap) -> list[float]:
+    """Length (m) of the boundary ring and of each obstacle ring."""
+    out = []
+    for ring in [wm.boundary] + list(wm.obstacles):
+        ring = np.asarray(ring, float)
+        out.append(float(np.sum(np.linalg.norm(np.roll(ring, -1, axis=0) - ring, axis=1))))
+    return out
+
+
+def euler_bound(wm: WorldMap, rv: float) -> dict:
+    """Lower bound on the robots of a swarm whose Rips triangles tile the free area.
+
+    Certified coverage means the free area is tiled by Rips triangles (edges <= rv, so area
+    <= sqrt(3)/4 rv^2 each) whose outer edges run along every wall (robots touching the
+    walls, at most rv apart, at least 3 around an obstacle). A planar triangulation of a
+    region with h holes, n vertices and b of them on its boundary has T = 2n - b - 2 + 2h
+    triangles, so n >= (A_free / (sqrt(3)/4 rv^2) + b + 2 - 2h) / 2 with b >= sum over
+    walls of max(3, ceil(length / rv)). Returns robots, boundary_vertices, holes, triangles.
+    """
+    b = sum(max(3, math.ceil(length / rv - 1e-9)) for length in ring_lengths(wm))
+    h = len(wm.obstacles)
+    triangles = wm.free_area / (TRI / 2 * rv * rv)
+    return dict(robots=max(1, math.ceil((triangles + b + 2 - 2 * h) / 2)), boundary_vertices=b,
+                holes=h, triangles=triangles)
+
+
+def default_robots_max(wm: WorldMap, rv: float, per_bound: float = ROBOTS_MAX_PER_BOUND) -> int:
+    """``run``'s default robots_max: ceil(per_bound x the Euler bound), so the cap grows with
+    the map (a fixed number stopped a 20 m x 12 m hall short)."""
+    return int(math.ceil(per_bound * euler_bound(wm, rv)["robots"]))
+
+
+def reachable_uncovered(wm: WorldMap, covered: np.ndarray, r, source, radius: float,
+                        rv: float, wall_margin_rv: float = 0.5) -> dict:
+    """Free area (m^2) that no robot covers although a robot's body could reach it from the
+    source, beyond ``wall_margin_rv`` x rv from every wall (issue 21's false-certificate
+    test). ``covered``, ``r``: the mask and Raster of :func:`coverage_fraction` (with
+    ``return_mask``). Walls are dilated by the robot radius, the body's free space is
+    flood-filled from the source cell, and cells within 0.5 rv of a wall are masked out
+    (grooves narrower than rv are the method's stated blind spots).
+
+    Returns uncovered_reachable_m2, reachable_m2 and the uncovered cells' bounding box
+    (``where``: [x0, y0, x1, y1] or None).
+    """
+    from scipy import ndimage
+    cell = r.cell
+    free = r.free
+    # distance (m) of each free cell centre to the nearest non-free cell (walls, outside)
+    dist = ndimage.distance_transform_edt(np.pad(free, 1))[1:-1, 1:-1] * cell
+    body = dist >= max(radius, 0.5 * cell)
+    sx = int(math.floor((float(source[0]) - r.x0) / cell))
+    sy = int(math.floor((float(source[1]) - r.y0) / cell))
+    ny, nx = free.shape
+    out = dict(uncovered_reachable_m2=0.0, reachable_m2=0.0, where=None)
+    if not (0 <= sx < nx and 0 <= sy < ny):
+        return out
+    if not body[sy, sx]:  # the source hugs a wall: start from the nearest body cell
+        jj, ii = np.nonzero(body)
+        if not len(jj):
+            return out
+        k = int(np.argmin((jj - sy) ** 2 + (ii - sx) ** 2))
+        sy, sx = int(jj[k]), int(ii[k])
+    lab, _ = ndimage.label(body)
+    reach = lab == lab[sy, sx]
+    # a body centre reaches its cell; the cells it covers extend radius further, but the
+    # check masks 0.5 rv along walls anyway
+    interior = reach & (dist > wall_margin_rv * rv)
+    miss = interior & ~covered
+    area = cell * cell
+    out["reachable_m2"] = float(reach.sum() * area)
+    out["uncovered_reachable_m2"] = float(miss.sum() * area)
+    if miss.any():
+        jj, ii = np.nonzero(miss)
+        out["where"] = [float(r.x0 + ii.min() * cell), float(r.y0 + jj.min() * cell),
+                        float(r.x0 + (ii.max() + 1) * cell), float(r.y0 + (jj.max() + 1) * cell)]
+    return out
 
 
 def lattice(d: float, rotation: float, offset, bounds) -> np.ndarray:
