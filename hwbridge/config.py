@@ -57,6 +57,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from bus.configcheck import ConfigError  # one style for every section
+
 from .frames import UP_AXES, Transform2D
 from .mocap import MOCAP_TYPES
 from .ros2 import ROS_MAPPINGS, check_ros_name
@@ -73,10 +75,6 @@ ROBOT_KEYS = {"id", "body", "kind", "output", "ros_mapping", "ros_namespace", "v
 FAKE_KEYS = {"latency_s", "v_noise", "w_noise", "slip", "mocap_rate_hz", "mocap_noise_m",
              "mocap_noise_rad", "seed"}
 TRANSFORM_KEYS = {"yaw", "tx", "ty", "scale"}
-
-
-class ConfigError(ValueError):
-    """A bad run config; the message names file, section, field and value."""
 
 
 @dataclass(frozen=True)
@@ -165,7 +163,7 @@ class _Ctx:
         self.path, self.section = path, section
 
     def err(self, fld: str, value: Any, why: str) -> ConfigError:
-        return ConfigError(f"{self.path}: [{self.section}] {fld} = {value!r}: {why}")
+        return ConfigError(self.path, self.section, fld, value, why)
 
     def num(self, d: dict, key: str, default: float, lo: float = -math.inf, hi: float = math.inf,
             strict_lo: bool = False) -> float:
@@ -220,9 +218,9 @@ def load(path: str | Path) -> BridgeConfig:
         with open(path, "rb") as f:
             doc = tomllib.load(f)
     except OSError as e:
-        raise ConfigError(f"{path}: cannot read: {e.strerror}") from None
+        raise ConfigError(path, "", "", None, f"cannot read: {e.strerror}") from None
     except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: not valid TOML: {e}") from None
+        raise ConfigError(path, "", "", None, f"not valid TOML: {e}") from None
     return from_dict(doc, path)
 
 
@@ -231,17 +229,18 @@ def loads(text: str, path: str = "<config>") -> BridgeConfig:
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: not valid TOML: {e}") from None
+        raise ConfigError(path, "", "", None, f"not valid TOML: {e}") from None
     return from_dict(doc, path)
 
 
 def from_dict(doc: dict, path: str = "<config>") -> BridgeConfig:
-    top = _Ctx(path, "top level")
+    top = _Ctx(path, "")
     rv = top.num(doc, "rv", 1.0, 0.0, 1e6, strict_lo=True)
     name = doc.get("name", Path(path).stem)
     hb = doc.get("hwbridge")
     if not isinstance(hb, dict):
-        raise ConfigError(f"{path}: no [hwbridge] section (needed by the hardware bridge)")
+        raise ConfigError(path, "", "", None,
+                          "no [hwbridge] section (needed by the hardware bridge)")
     c = _Ctx(path, "hwbridge")
     c.unknown(hb, TOP_KEYS)
 
