@@ -102,13 +102,13 @@ class Checker:
         if not isinstance(v, (list, tuple)) or len(v) < 3:
             raise self.err(name, v, "expected a polygon: a list of at least 3 points [x, y]")
         pts = tuple(self.point(f"{name}[{k}]", p, lim) for k, p in enumerate(v))
-        if abs(polygon_signed_area(pts)) < 1e-12:
-            raise self.err(name, v, "polygon has zero area")
         bad = self_crossing(pts)
         if bad is not None:
             i, j = bad
             raise self.err(name, v, f"not a simple polygon: edge {i} ({i}-{(i + 1) % len(pts)}) "
                                     f"meets edge {j} ({j}-{(j + 1) % len(pts)})")
+        if abs(polygon_signed_area(pts)) < 1e-12:
+            raise self.err(name, v, "polygon has zero area")
         return pts
 
     def unknown(self, d: Mapping, allowed: Iterable[str], hint: Mapping[str, str] | None = None):
