@@ -117,9 +117,38 @@ def check_run(args) -> Checked:
     # the map itself: ROS images, size limits, sources in free space
     from world.maps import build_map
     wmap = build_map(cfg)
+    _check_spawns(cfg, wmap)
+    if args.router is not None:
+        _check_reachable(Checker(CLI, ""), "--router", args.router)
     swarm = args.swarm or "".join(ch if ch.isalnum() or ch in "-_" else "_"
                                   for ch in cfg.name)[:64] or "run"
     return Checked(cfg, resolved, wmap, live_limits, swarm)
+
+
+def _check_spawns(cfg, wmap) -> None:
+    """[world].spawn bodies must start in free space, at a source that exists."""
+    ck = Checker(cfg.path, "world")
+    for k, sp in enumerate(cfg.world.spawn):
+        if sp.pose is not None:
+            if not wmap.contains([sp.pose[:2]])[0]:
+                raise ck.err(f"spawn[{k}].pose", list(sp.pose), "not in free space")
+        elif sp.source >= len(wmap.sources):
+            raise ck.err(f"spawn[{k}].source", sp.source,
+                         f"only {len(wmap.sources)} source(s) on this map")
+
+
+def _check_reachable(ck: Checker, flag: str, endpoint: str) -> None:
+    """A TCP router endpoint must accept a connection now (else every process would wait
+    for it and give up one by one)."""
+    if not endpoint.startswith(("tcp/", "tls/")):
+        return
+    host, _, port = endpoint.split("/", 1)[1].split("#", 1)[0].rpartition(":")
+    host = host.strip("[]")
+    try:
+        with socket.create_connection((host, int(port)), timeout=3.0):
+            pass
+    except OSError as e:
+        raise ck.err(flag, endpoint, f"no router answers there: {e.strerror or e}") from None
 
 
 def prepare_out(out: Path) -> Path:

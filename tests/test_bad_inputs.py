@@ -6,6 +6,8 @@ as long as Python's imports.
 """
 from __future__ import annotations
 
+import os
+import signal
 import socket
 import subprocess
 from pathlib import Path
@@ -26,6 +28,12 @@ def _patch(base: str, old: str, new: str) -> str:
 
 def _ros(tmp: Path, yaml_text: str, pgm: bytes | None = None) -> Path:
     (tmp / "m.pgm").write_bytes(pgm if pgm is not None else OFFICE_PGM.read_bytes())
+    p = tmp / "m.yaml"
+    p.write_text(yaml_text)
+    return p
+
+
+def _yaml_only(tmp: Path, yaml_text: str) -> Path:
     p = tmp / "m.yaml"
     p.write_text(yaml_text)
     return p
@@ -75,11 +83,13 @@ ROWS = [
                                       "[[1, 0.5], [2, 1.5], [2, 0.5], [1, 1.5]]}]\nsources = "),
      [], ["[map] obstacles[0].points", "not a simple polygon"]),
     ("zero-area boundary", _patch(TINY, "[[0, 0], [3, 0], [3, 2], [0, 2]]", "[[0, 0], [1, 1], [2, 2]]"),
-     [], ["[map] boundary", "zero area"]),
+     [], ["[map] boundary = [[0, 0], [1, 1], [2, 2]]"]),
     ("huge map", _patch(TINY, "[[0, 0], [3, 0], [3, 2], [0, 2]]", "[[0, 0], [1e6, 0], [1e6, 1e6], [0, 1e6]]"),
      [], ["[map] boundary", "limit of 2000 rv"]),
     ("wide map", _patch(TINY, "[[0, 0], [3, 0], [3, 2], [0, 2]]", "[[0, 0], [1000, 0], [1000, 100], [0, 100]]"),
      [], ["[map] boundary", "limit of 40000 rv^2"]),
+    ("spawn in a wall", TINY + "spawn = [{robot = 0, pose = [5.0, 1.0]}]\n", [],
+     ["[world] spawn[0].pose = [5.0, 1.0, 0.0]", "not in free space"]),
     ("source outside", _patch(TINY, "x = 0.3, y = 1.0", "x = 5.0, y = 1.0"), [], ["[map] sources[0]", "not in free space"]),
     # ---- ROS maps
     ("ros resolution huge", lambda t: _ros(t, YAML.format(res=100000, extra="")), [],
@@ -88,7 +98,7 @@ ROWS = [
     ("ros decompression bomb", lambda t: _ros(t, YAML.format(res=0.05, extra=""),
                                               b"P5\n20000 20000\n255\n" + bytes(1000)), [],
      ["[ros_map] image", "limit"]),
-    ("ros image missing", lambda t: (t / "m.yaml").write_text(YAML.format(res=0.05, extra="")) or t / "m.yaml", [],
+    ("ros image missing", lambda t: _yaml_only(t, YAML.format(res=0.05, extra="")), [],
      ["[ros_map] image = 'm.pgm'", "not found"]),
     ("ros image garbage", lambda t: _ros(t, YAML.format(res=0.05, extra=""), b"not an image"), [],
      ["[ros_map] image = ", "cannot read image"]),
@@ -111,12 +121,17 @@ ROWS = [
     ("view-port too big", TINY, ["--view", "--view-port", "70000"], ["--view-port = 70000"]),
     ("router nonsense", TINY, ["--router", "localhost"], ["--router = 'localhost'"]),
     ("router bad port", TINY, ["--router", "tcp/127.0.0.1:99999"], ["--router = 'tcp/127.0.0.1:99999'"]),
+    ("router not listening", TINY, ["--router", "tcp/127.0.0.1:{closed}"],
+     ["--router = 'tcp/127.0.0.1:{closed}'", "no router answers"]),
+    ("out is a file", TINY, ["--out", "{tmp}/afile"], ["--out = '{tmp}/afile'", "cannot write"]),
     ("out under a file", TINY, ["--out", "{tmp}/afile/run"], ["--out = '{tmp}/afile/run'", "cannot write"]),
     ("out in /proc", TINY, ["--out", "/proc/swarmcover-run"], ["--out = '/proc/swarmcover-run'", "cannot write"]),
     ("log level", TINY, ["--log-level", "LOUD"], ["--log-level = 'LOUD'"]),
     ("secure missing", TINY, ["--secure", "{tmp}/no-such-dir"], ["--secure = '{tmp}/no-such-dir'"]),
 ]
 ARGPARSE_ROWS = {"wall-timeout word"}
+# a bound, not a speed test: each row is done in the time Python takes to import the CLI
+TIMEOUT_S = float(os.environ.get("SWARMCOVER_BAD_INPUT_TIMEOUT_S", "60"))
 
 
 def _config(tmp_path: Path, make) -> Path:
@@ -134,7 +149,10 @@ def test_bad_input_exits_2_naming_the_field(tmp_path, row):
     busy = socket.socket()
     busy.bind(("127.0.0.1", 0))
     busy.listen(1)
-    subs = dict(tmp=str(tmp_path), busy=str(busy.getsockname()[1]))
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        closed = s.getsockname()[1]          # a port nobody listens on
+    subs = dict(tmp=str(tmp_path), busy=str(busy.getsockname()[1]), closed=str(closed))
     try:
         conf = _config(tmp_path, make)
         flags = [f.format(**subs) for f in flags]
@@ -144,7 +162,11 @@ def test_bad_input_exits_2_naming_the_field(tmp_path, row):
         p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                              cwd=str(ROOT), start_new_session=True)
         try:
-            out, _ = p.communicate(timeout=60)
+            out, _ = p.communicate(timeout=TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            _reap(p, tmp_path)
+            out, _ = p.communicate(timeout=5)
+            out += f"\n<still running after {TIMEOUT_S:g} s>"
         finally:
             _reap(p, tmp_path)
     finally:
@@ -163,8 +185,6 @@ def test_bad_input_exits_2_naming_the_field(tmp_path, row):
 
 
 def _reap(p: subprocess.Popen, tmp_path: Path) -> None:
-    import os
-    import signal
     if p.poll() is None:
         try:
             os.killpg(p.pid, signal.SIGKILL)

@@ -114,3 +114,76 @@ def test_bare_ros_yaml_gets_defaults_and_an_automatic_source():
     assert cfg.map.ros_map.endswith("office.yaml") and cfg.world.mode == "lockstep"
     assert len(wm.sources) == 1 and wm.info.get("auto_source")
     assert wm.is_free(wm.sources[:, :2], margin=0.5).all()   # well clear of every wall
+
+
+@pytest.mark.parametrize("extra,section,field,value", [
+    ("[coordinater]\nrobots_max = 5\n", "coordinater", "", None),
+    ("[run]\nx = 1\n", "run", "", None),
+])
+def test_unknown_sections_are_errors(tmp_path, extra, section, field, value):
+    p = write(tmp_path, BASE + extra)
+    with pytest.raises(ConfigError, match="unknown section") as ei:
+        load_config(p)
+    assert (ei.value.section, ei.value.field, ei.value.value) == (section, field, value)
+    assert f"[{section}]" in str(ei.value) and str(p) in str(ei.value)
+
+
+@pytest.mark.parametrize("text,field", [
+    ("rv = nan\n", "rv"),
+    ("rv = inf\n", "rv"),
+    ("[world]\ndt = nan\n", "dt"),
+    ("[world]\ntick_timeout_s = inf\n", "tick_timeout_s"),
+    ("[robots]\nv_max = -inf\n", "v_max"),
+    ("[sensing]\nnoise_deg = nan\n", "noise_deg"),
+])
+def test_nan_and_infinities_are_refused(tmp_path, text, field):
+    base = BASE.replace('rv = 1.0\n', '') if text.startswith("rv") else BASE
+    text = text + base if text.startswith("rv") else base + text
+    with pytest.raises(ConfigError, match="not finite") as ei:
+        load_config(write(tmp_path, text))
+    assert ei.value.field == field
+
+
+def test_polygons_must_be_simple(tmp_path):
+    bowtie = BASE.replace("[[0, 0], [4, 0], [4, 3], [0, 3]]", "[[0, 0], [4, 3], [4, 0], [0, 2]]")
+    with pytest.raises(ConfigError, match=r"\[map\] boundary = .*not a simple polygon: edge 0"):
+        load_config(write(tmp_path, bowtie))
+    obst = BASE.replace("sources", "obstacles = [{type = 'polygon', points = "
+                                   "[[1, 1], [2, 2], [2, 1], [1, 2]]}]\nsources")
+    with pytest.raises(ConfigError, match=r"\[map\] obstacles\[0\]\.points = .*not a simple"):
+        load_config(write(tmp_path, obst))
+    # collinear vertices and a non-convex simple polygon are fine
+    ok = BASE.replace("[[0, 0], [4, 0], [4, 3], [0, 3]]",
+                      "[[0, 0], [2, 0], [4, 0], [4, 3], [2, 1], [0, 3]]")
+    assert len(load_config(write(tmp_path, ok)).map.boundary) == 6
+
+
+def test_map_size_is_bounded_with_the_limit_stated(tmp_path):
+    from world.maps import MAX_MAP_AREA_RV2, MAX_MAP_SIDE_RV
+    huge = BASE.replace("[[0, 0], [4, 0], [4, 3], [0, 3]]",
+                        "[[0, 0], [1e6, 0], [1e6, 1e6], [0, 1e6]]")
+    with pytest.raises(ConfigError, match=f"limit of {MAX_MAP_SIDE_RV:g} rv") as ei:
+        build_map(load_config(write(tmp_path, huge)))
+    assert (ei.value.section, ei.value.field) == ("map", "boundary")
+    wide = BASE.replace("[[0, 0], [4, 0], [4, 3], [0, 3]]",
+                        "[[0, 0], [1000, 0], [1000, 100], [0, 100]]")
+    with pytest.raises(ConfigError, match=f"limit of {MAX_MAP_AREA_RV2:g} rv"):
+        build_map(load_config(write(tmp_path, wide)))
+    # the same map is fine with a larger rv (the limits are in rv)
+    assert build_map(load_config(write(tmp_path, wide.replace("rv = 1.0", "rv = 5.0")))) \
+        .bounds == (0.0, 0.0, 1000.0, 100.0)
+
+
+def test_ros_map_size_is_bounded_before_pixels_are_read(tmp_path):
+    img = tmp_path / "m.pgm"
+    img.write_bytes(b"P5\n20000 20000\n255\n" + bytes(1000))     # 1 KB claiming 400 M pixels
+    y = tmp_path / "m.yaml"
+    y.write_text("image: m.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n")
+    with pytest.raises(ConfigError, match="limit") as ei:
+        map_from_path(y)
+    assert (ei.value.section, ei.value.field) == ("ros_map", "image")
+    img.write_bytes((CONFIGS / "maps" / "office.pgm").read_bytes())
+    y.write_text("image: m.pgm\nresolution: 100000\norigin: [0, 0, 0]\n")
+    with pytest.raises(ConfigError, match="limit of 2000 rv") as ei:
+        map_from_path(y)
+    assert (ei.value.section, ei.value.field, ei.value.value) == ("ros_map", "resolution", 100000)
