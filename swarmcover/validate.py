@@ -105,15 +105,17 @@ def check_run(args) -> Checked:
     from swarmcover.run import _live_limits, resolve_config
     cfg, resolved = resolve_config(args.config, args)
     path = cfg.path
-    # [coordinator], as the coordinator will read it (with --robots-max applied)
-    from coordinator.config import CoordinatorConfig
-    CoordinatorConfig.from_section(cfg.section("coordinator"), rv=cfg.rv, where=path)
+    # cheapest first, so a bad value is reported before the heavy imports
     # [agent] (and the [robots]/[sensing]/[world] values agents read), as every agent will
     # read it from the resolved file: a bad value here would kill every agent at start
     from agents.params import from_toml_text
     from_toml_text(resolved, path)
     # [hwbridge], by the bridge's own parser
     live_limits = _live_limits(cfg, resolved, path)
+    # [coordinator], as the coordinator will read it (with --robots-max applied); importing
+    # it loads the topology core (scipy)
+    from coordinator.config import CoordinatorConfig
+    CoordinatorConfig.from_section(cfg.section("coordinator"), rv=cfg.rv, where=path)
     # the map itself: ROS images, size limits, sources in free space
     from world.maps import build_map
     wmap = build_map(cfg)

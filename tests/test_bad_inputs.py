@@ -77,10 +77,10 @@ ROWS = [
     ("not TOML", "rv = [1\n", [], ["not valid TOML"]),
     ("no map", "rv = 1.0\n", [], ["[map]", "missing"]),
     # ---- geometry
-    ("self-crossing boundary", _patch(TINY, "[[0, 0], [3, 0], [3, 2], [0, 2]]", "[[0, 0], [3, 2], [3, 0], [0, 2]]"),
+    ("self-crossing boundary", _patch(TINY, "[[0, 0], [3, 0], [3, 2], [0, 2]]", "[[0, 0], [3, 2], [3, 0], [0, 1.5]]"),
      [], ["[map] boundary", "not a simple polygon"]),
     ("self-crossing obstacle", _patch(TINY, "sources = ", 'obstacles = [{type = "polygon", points = '
-                                      "[[1, 0.5], [2, 1.5], [2, 0.5], [1, 1.5]]}]\nsources = "),
+                                      "[[1, 0.5], [2, 1.5], [2, 0.5], [1, 1.2]]}]\nsources = "),
      [], ["[map] obstacles[0].points", "not a simple polygon"]),
     ("zero-area boundary", _patch(TINY, "[[0, 0], [3, 0], [3, 2], [0, 2]]", "[[0, 0], [1, 1], [2, 2]]"),
      [], ["[map] boundary = [[0, 0], [1, 1], [2, 2]]"]),
