@@ -147,18 +147,12 @@ class _Ctx(Checker):
     """The world's sections use the common checks (finite numbers, simple polygons)."""
 
 
-def _check_keys(ctx: _Ctx, d: dict, allowed) -> None:
-    for k in d:
-        if k not in allowed:
-            raise ctx.err(k, d[k], f"unknown field (known: {', '.join(sorted(allowed))})")
-
-
 # --------------------------------------------------------------------------- sections
 
 def _parse_map(d: dict, file: str, base_dir: str) -> MapConfig:
     ctx = _Ctx(file, "map")
     allowed = {f.name for f in fields(MapConfig)}
-    _check_keys(ctx, d, allowed)
+    ctx.unknown(d, allowed)
     boundary = ros_map = None
     if "boundary" in d and "ros_map" in d:
         raise ctx.err("ros_map", d["ros_map"], "give either boundary or ros_map, not both")
@@ -186,19 +180,19 @@ def _parse_map(d: dict, file: str, base_dir: str) -> MapConfig:
         ctx.table(name, o)
         t = o.get("type")
         if t == "rect":
-            _check_keys(ctx, o, {"type", "min", "max"})
+            ctx.unknown(o, {"type", "min", "max"})
             lo = ctx.point(f"{name}.min", o.get("min"))
             hi = ctx.point(f"{name}.max", o.get("max"))
             if not (hi[0] > lo[0] and hi[1] > lo[1]):
                 raise ctx.err(f"{name}.max", o.get("max"), "must exceed min in x and y")
             obstacles.append(Obstacle("rect", points=(lo, hi)))
         elif t == "circle":
-            _check_keys(ctx, o, {"type", "center", "radius"})
+            ctx.unknown(o, {"type", "center", "radius"})
             c = ctx.point(f"{name}.center", o.get("center"))
             r = ctx.num(f"{name}.radius", o.get("radius"), 0.0, 1e6, lo_open=True)
             obstacles.append(Obstacle("circle", center=c, radius=r))
         elif t == "polygon":
-            _check_keys(ctx, o, {"type", "points"})
+            ctx.unknown(o, {"type", "points"})
             obstacles.append(Obstacle("polygon", points=ctx.polygon(f"{name}.points",
                                                                     o.get("points"))))
         else:
@@ -210,7 +204,7 @@ def _parse_map(d: dict, file: str, base_dir: str) -> MapConfig:
     for k, s in enumerate(src):
         name = f"sources[{k}]"
         ctx.table(name, s)
-        _check_keys(ctx, s, {"x", "y", "theta"})
+        ctx.unknown(s, {"x", "y", "theta"})
         if "x" not in s or "y" not in s:
             raise ctx.err(name, s, "needs x and y")
         sources.append((ctx.num(f"{name}.x", s["x"], -1e6, 1e6),
@@ -227,7 +221,7 @@ def _parse_map(d: dict, file: str, base_dir: str) -> MapConfig:
 
 def _parse_robots(d: dict, file: str) -> RobotsConfig:
     ctx = _Ctx(file, "robots")
-    _check_keys(ctx, d, {f.name for f in fields(RobotsConfig)})
+    ctx.unknown(d, {f.name for f in fields(RobotsConfig)})
     dflt = RobotsConfig()
     return RobotsConfig(
         radius=ctx.num("radius", d.get("radius", dflt.radius), 0.0, 100.0, lo_open=True),
@@ -239,7 +233,7 @@ def _parse_robots(d: dict, file: str) -> RobotsConfig:
 
 def _parse_sensing(d: dict, file: str) -> SensingConfig:
     ctx = _Ctx(file, "sensing")
-    _check_keys(ctx, d, {f.name for f in fields(SensingConfig)})
+    ctx.unknown(d, {f.name for f in fields(SensingConfig)})
     dflt = SensingConfig()
     return SensingConfig(
         rate_hz=ctx.num("rate_hz", d.get("rate_hz", dflt.rate_hz), 0.0, 1e4, lo_open=True),
@@ -252,7 +246,7 @@ def _parse_sensing(d: dict, file: str) -> SensingConfig:
 
 def _parse_world(d: dict, file: str) -> WorldConfig:
     ctx = _Ctx(file, "world")
-    _check_keys(ctx, d, {f.name for f in fields(WorldConfig)})
+    ctx.unknown(d, {f.name for f in fields(WorldConfig)})
     dflt = WorldConfig()
     spawn = []
     sp = d.get("spawn", [])
@@ -262,7 +256,7 @@ def _parse_world(d: dict, file: str) -> WorldConfig:
     for k, s in enumerate(sp):
         name = f"spawn[{k}]"
         ctx.table(name, s)
-        _check_keys(ctx, s, {"robot", "source", "kind", "live", "pose"})
+        ctx.unknown(s, {"robot", "source", "kind", "live", "pose"})
         if "robot" not in s:
             raise ctx.err(name, s, "needs robot (an id)")
         rid = ctx.int_(f"{name}.robot", s["robot"], 0, 2**62)
