@@ -187,3 +187,32 @@ def test_ros_map_size_is_bounded_before_pixels_are_read(tmp_path):
     with pytest.raises(ConfigError, match="limit of 2000 rv") as ei:
         map_from_path(y)
     assert (ei.value.section, ei.value.field, ei.value.value) == ("ros_map", "resolution", 100000)
+
+
+def test_one_style_for_every_section():
+    """[map]..[world], [agent], [coordinator] and [hwbridge] raise the same ConfigError with
+    the same one-line message: file: [section] field = value: reason."""
+    from agents.params import ParamError, from_toml_text
+    from bus.configcheck import ConfigError as Common
+    from bus.configcheck import self_crossing
+    from coordinator.config import CoordinatorConfig
+    from hwbridge import config as hwconfig
+    assert ConfigError is Common and hwconfig.ConfigError is Common
+    assert issubclass(ParamError, Common)
+    errs = []
+    for make in (lambda: loads_config(BASE + "[world]\ndt = nan\n", "f.toml"),
+                 lambda: from_toml_text(BASE + "[agent]\ng0 = nan\n", "f.toml"),
+                 lambda: CoordinatorConfig.from_section({"settle_s": float("nan")}, 1.0, "f.toml"),
+                 lambda: hwconfig.loads(BASE + '[hwbridge]\nkp = nan\n[[hwbridge.robots]]\n'
+                                                'id = 1\nbody = "b"\n', "f.toml")):
+        with pytest.raises(Common) as ei:
+            make()
+        errs.append((ei.value.file, ei.value.section, str(ei.value)))
+    assert errs == [("f.toml", "world", "f.toml: [world] dt = nan: not finite"),
+                    ("f.toml", "agent", "f.toml: [agent] g0 = nan: not finite"),
+                    ("f.toml", "coordinator", "f.toml: [coordinator] settle_s = nan: not finite"),
+                    ("f.toml", "hwbridge", "f.toml: [hwbridge] kp = nan: not finite")]
+    # simple-polygon test: collinear runs are fine, folds and touching edges are not
+    assert self_crossing([[0, 0], [1, 0], [2, 0], [2, 1], [0, 1]]) is None
+    assert self_crossing([[0, 0], [2, 0], [1, 0], [1, 1]]) is not None        # folds back
+    assert self_crossing([[0, 0], [2, 0], [2, 2], [1, 0], [0, 2]]) is not None  # a vertex on an edge
