@@ -81,10 +81,25 @@ def check_flags(args) -> None:
         if not Path(args.secure).expanduser().is_dir():
             raise ck.err("--secure", args.secure, "no such directory (create one with "
                                                   "`swarmcover secure init DIR`)")
+        _check_profile(ck, args)
     level = str(args.log_level).upper()
     if not isinstance(logging.getLevelName(level), int):
         raise ck.err("--log-level", args.log_level,
                      "expected one of DEBUG, INFO, WARNING, ERROR, CRITICAL")
+
+
+def _check_profile(ck: Checker, args) -> None:
+    """The --secure profile holds what the router we start, the world, the coordinator and
+    run itself need (each agent's identity is checked by the agent)."""
+    from bus.security import SecurityError, config_inserts
+    wanted = [("client", r) for r in ("world", "coordinator", "viewer")]
+    if args.router is None:
+        wanted.insert(0, ("router", "router"))
+    for mode, role in wanted:
+        try:
+            config_inserts(args.secure, mode=mode, role=role)
+        except SecurityError as e:
+            raise ck.err("--secure", args.secure, f"incomplete profile: {e}") from None
 
 
 def _check_endpoint(ck: Checker, flag: str, v: str) -> None:

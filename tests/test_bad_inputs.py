@@ -127,6 +127,7 @@ ROWS = [
     ("out under a file", TINY, ["--out", "{tmp}/afile/run"], ["--out = '{tmp}/afile/run'", "cannot write"]),
     ("out in /proc", TINY, ["--out", "/proc/swarmcover-run"], ["--out = '/proc/swarmcover-run'", "cannot write"]),
     ("log level", TINY, ["--log-level", "LOUD"], ["--log-level = 'LOUD'"]),
+    ("secure empty", TINY, ["--secure", "{tmp}"], ["--secure = '{tmp}'", "incomplete profile"]),
     ("secure missing", TINY, ["--secure", "{tmp}/no-such-dir"], ["--secure = '{tmp}/no-such-dir'"]),
 ]
 ARGPARSE_ROWS = {"wall-timeout word"}
