@@ -143,7 +143,16 @@ def check_run(args) -> Checked:
 
 
 def _check_spawns(cfg, wmap) -> None:
-    """[world].spawn bodies must start in free space, at a source that exists."""
+    """Robots must fit at every source, and [world].spawn bodies must start in free space,
+    at a source that exists."""
+    clear = wmap.clearance(wmap.sources[:, :2])
+    r = cfg.robots.radius
+    for k in range(len(wmap.sources)):
+        if clear[k] < r:
+            where = f"sources[{k}]" if cfg.map.sources else f"sources (picked {k})"
+            raise ConfigError(cfg.path, "map", where, [round(float(v), 6) for v in wmap.sources[k]],
+                              f"{clear[k]:.3g} m from a wall: a robot of [robots] radius "
+                              f"{r:g} m does not fit there")
     ck = Checker(cfg.path, "world")
     for k, sp in enumerate(cfg.world.spawn):
         if sp.pose is not None:

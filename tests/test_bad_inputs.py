@@ -90,6 +90,8 @@ ROWS = [
      [], ["[map] boundary", "limit of 40000 rv^2"]),
     ("spawn in a wall", TINY + "spawn = [{robot = 0, pose = [5.0, 1.0]}]\n", [],
      ["[world] spawn[0].pose = [5.0, 1.0, 0.0]", "not in free space"]),
+    ("robot does not fit", _patch(TINY, "radius = 0.06", "radius = 0.5"), [],
+     ["[map] sources[0] = [0.3, 1.0, 0.0]", "radius 0.5 m does not fit"]),
     ("source outside", _patch(TINY, "x = 0.3, y = 1.0", "x = 5.0, y = 1.0"), [], ["[map] sources[0]", "not in free space"]),
     # ---- ROS maps
     ("ros resolution huge", lambda t: _ros(t, YAML.format(res=100000, extra="")), [],
