@@ -135,6 +135,8 @@ def check_run(args) -> Checked:
     from world.maps import build_map
     wmap = build_map(cfg)
     _check_spawns(cfg, wmap)
+    if live_limits:
+        _check_live(cfg, resolved, wmap)
     if args.router is not None:
         _check_reachable(Checker(CLI, ""), "--router", args.router)
     swarm = args.swarm or "".join(ch if ch.isalnum() or ch in "-_" else "_"
@@ -161,6 +163,17 @@ def _check_spawns(cfg, wmap) -> None:
         elif sp.source >= len(wmap.sources):
             raise ck.err(f"spawn[{k}].source", sp.source,
                          f"only {len(wmap.sources)} source(s) on this map")
+
+
+def _check_live(cfg, resolved: str, wmap) -> None:
+    """Each live robot's twin spawns at a source that exists; a stand-in starts in free space."""
+    from hwbridge.config import loads
+    for k, r in enumerate(loads(resolved, cfg.path).robots):
+        ck = Checker(cfg.path, f"hwbridge.robots[{k}]")
+        if r.source >= len(wmap.sources):
+            raise ck.err("source", r.source, f"only {len(wmap.sources)} source(s) on this map")
+        if r.start is not None and not wmap.contains([r.start[:2]])[0]:
+            raise ck.err("start", list(r.start), "not in free space")
 
 
 def _check_reachable(ck: Checker, flag: str, endpoint: str) -> None:

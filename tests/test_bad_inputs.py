@@ -73,6 +73,8 @@ ROWS = [
     ("robots kind", _patch(TINY, 'kind = "holonomic"', 'kind = "tank"'), [], ["[robots] kind = 'tank'"]),
     ("sensing nan", _patch(TINY, "noise_deg = 0.5", "noise_deg = nan"), [], ["[sensing] noise_deg = nan"]),
     ("hwbridge nan", _patch(MIXED, "kp = 3.0", "kp = nan"), [], ["[hwbridge] kp = nan"]),
+    ("hwbridge source", _patch(MIXED, "fake = true", "fake = true\nsource = 3"), [],
+     ["[hwbridge.robots[0]] source = 3", "only 1 source"]),
     ("hwbridge unknown", _patch(MIXED, "kp = 3.0", "kpp = 3.0"), [], ["[hwbridge] kpp = 3.0", "unknown field"]),
     ("not TOML", "rv = [1\n", [], ["not valid TOML"]),
     ("no map", "rv = 1.0\n", [], ["[map]", "missing"]),
