@@ -732,7 +732,7 @@ def build_map(cfg: RunConfig) -> WorldMap:
         disjoint = not extra
     else:
         boundary = np.array(m.boundary, float)
-        check_extent(cfg.path, "map", "boundary", m.boundary,
+        check_extent(cfg.path, "map", "boundary", [list(p) for p in m.boundary],
                      (*boundary.min(0), *boundary.max(0)), cfg.rv)
         obstacles = extra
         disjoint = _disjoint(boundary, obstacles)
