@@ -13,10 +13,12 @@ import tomllib
 from dataclasses import dataclass
 from typing import Any, Mapping
 
+from bus.configcheck import Checker, ConfigError
+
 ROBOT_KINDS = ("holonomic", "diffdrive")
 
 
-class ParamError(ValueError):
+class ParamError(ConfigError):
     """A bad parameter; the message names the source, section, field and value."""
 
 
@@ -108,46 +110,55 @@ _POSITIVE = {"v_max", "w_max", "rv", "dt", "g0", "arrive_deg", "lost_timeout_s",
              "contact_clear_rv", "k_w", "k_v", "error_alpha"}
 
 
-def _coerce(name: str, value: Any, where: str) -> Any:
+# the section of the run config each field is read from
+_SECTION_OF = {"kind": "robots", "v_max": "robots", "w_max": "robots", "radius": "robots",
+               "rv": "", "n_touch": "sensing", "dt": "world"}
+
+
+def _err(where: str, name: str, value: Any, reason: str) -> ParamError:
+    return ParamError(where, _SECTION_OF.get(name, "agent"), name, value, reason)
+
+
+def _coerce(name: str, value: Any, where: str, section: str | None = None) -> Any:
+    """Type-check one value (finite floats, ints that are not bools, strings, bools)."""
+    ck = Checker(where, _SECTION_OF.get(name, "agent") if section is None else section)
     typ = _FIELDS[name].type
-    bad = ParamError(f"{where}.{name} = {value!r}: expected {typ}")
-    if typ == "float":
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise bad
-        value = float(value)
-        if not math.isfinite(value):
-            raise ParamError(f"{where}.{name} = {value!r}: not finite")
-    elif typ == "int":
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise bad
-    elif typ == "str":
-        if not isinstance(value, str):
-            raise bad
-    elif typ == "bool":
-        if not isinstance(value, bool):
-            raise bad
+    try:
+        if typ == "float":
+            return ck.num(name, value)
+        if typ == "int":
+            return ck.int_(name, value)
+        if typ == "str":
+            return ck.str_(name, value)
+        if typ == "bool":
+            return ck.bool_(name, value)
+    except ConfigError as e:
+        raise ParamError(e.file, e.section, e.field, e.value, e.reason) from None
     return value
 
 
 def check(p: AgentParams, where: str = "params") -> AgentParams:
     """Range checks; raises ParamError naming the field and value."""
+    for name, f in _FIELDS.items():
+        if f.type == "float" and not math.isfinite(getattr(p, name)):
+            raise _err(where, name, getattr(p, name), "not finite")
     for name in _POSITIVE:
         if getattr(p, name) <= 0:
-            raise ParamError(f"{where}: {name} = {getattr(p, name)!r} must be > 0")
+            raise _err(where, name, getattr(p, name), "must be > 0")
     if p.kind not in ROBOT_KINDS:
-        raise ParamError(f"{where}: kind = {p.kind!r} not one of {', '.join(ROBOT_KINDS)}")
+        raise _err(where, "kind", p.kind, f"not one of {', '.join(ROBOT_KINDS)}")
     if p.align not in ("auto", "on", "off"):
-        raise ParamError(f"{where}: align = {p.align!r} not one of auto, on, off")
+        raise _err(where, "align", p.align, "not one of auto, on, off")
     if p.error_alpha > 1:
-        raise ParamError(f"{where}: error_alpha = {p.error_alpha!r} must be <= 1")
+        raise _err(where, "error_alpha", p.error_alpha, "must be <= 1")
     for name in ("n_touch", "arrive_ticks", "hold_window", "link_lost_ticks", "settle_ticks",
                  "status_every"):
         if getattr(p, name) < 1:
-            raise ParamError(f"{where}: {name} = {getattr(p, name)!r} must be >= 1")
+            raise _err(where, name, getattr(p, name), "must be >= 1")
     if p.scale_margin_steps < 0:
-        raise ParamError(f"{where}: scale_margin_steps = {p.scale_margin_steps!r} must be >= 0")
+        raise _err(where, "scale_margin_steps", p.scale_margin_steps, "must be >= 0")
     if p.radius < 0:
-        raise ParamError(f"{where}: radius = {p.radius!r} must be >= 0")
+        raise _err(where, "radius", p.radius, "must be >= 0")
     return p
 
 
@@ -158,13 +169,13 @@ def from_config(cfg: Mapping[str, Any], source: str = "run config",
     read (their owners validate them)."""
     kw: dict[str, Any] = {}
 
-    def take(section: Mapping[str, Any] | None, key: str, name: str, where: str):
+    def take(section: Mapping[str, Any] | None, key: str, name: str, sec: str):
         if section is not None and key in section:
-            kw[name] = _coerce(name, section[key], where)
+            kw[name] = _coerce(name, section[key], source, sec)
 
     if not isinstance(cfg, Mapping):
-        raise ParamError(f"{source}: expected a TOML table")
-    take(cfg, "rv", "rv", source)
+        raise ParamError(source, "", "", None, "expected a TOML table")
+    take(cfg, "rv", "rv", "")
     for sec_name, pairs in (("robots", (("radius", "radius"), ("kind", "kind"),
                                         ("v_max", "v_max"), ("w_max", "w_max"))),
                             ("sensing", (("n_touch", "n_touch"),)),
@@ -173,18 +184,22 @@ def from_config(cfg: Mapping[str, Any], source: str = "run config",
         if sec is None:
             continue
         if not isinstance(sec, Mapping):
-            raise ParamError(f"{source}: [{sec_name}] is not a table")
+            raise ParamError(source, sec_name, "", None, "expected a table")
         for key, name in pairs:
-            take(sec, key, name, f"{source} [{sec_name}]")
+            take(sec, key, name, sec_name)
     agent = cfg.get("agent")
     if agent is not None:
         if not isinstance(agent, Mapping):
-            raise ParamError(f"{source}: [agent] is not a table")
+            raise ParamError(source, "agent", "", None, "expected a table")
+        ck = Checker(source, "agent")
+        try:
+            ck.unknown(agent, set(_FIELDS) - _NOT_IN_AGENT,
+                       hint={k: " (set it in [robots])" for k in ("kind", "v_max", "w_max",
+                                                                   "radius")})
+        except ConfigError as e:
+            raise ParamError(e.file, e.section, e.field, e.value, e.reason) from None
         for key, value in agent.items():
-            if key not in _FIELDS or key in _NOT_IN_AGENT:
-                hint = " (set it in [robots])" if key in ("kind", "v_max", "w_max", "radius") else ""
-                raise ParamError(f"{source} [agent].{key} = {value!r}: unknown field{hint}")
-            kw[key] = _coerce(key, value, f"{source} [agent]")
+            kw[key] = _coerce(key, value, source, "agent")
     p = dataclasses.replace(base or AgentParams(), **kw)
     return check(p, source)
 
@@ -193,20 +208,22 @@ def from_toml_text(text: str, source: str) -> AgentParams:
     try:
         cfg = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise ParamError(f"{source}: not valid TOML: {e}") from None
+        raise ParamError(source, "", "", None, f"not valid TOML: {e}") from None
     return from_config(cfg, source)
 
 
 def parse_override(item: str, p: AgentParams) -> AgentParams:
     """Apply one ``--param NAME=VALUE`` (VALUE parsed as a TOML value, bare words as strings)."""
     if "=" not in item:
-        raise ParamError(f"--param {item!r}: expected NAME=VALUE")
+        raise ParamError("--param", "", "", item, "expected NAME=VALUE")
     name, raw = item.split("=", 1)
     name = name.strip()
     if name not in _FIELDS:
-        raise ParamError(f"--param {name} = {raw!r}: unknown field")
+        raise ParamError("--param", "agent", name, raw, "unknown field (known: "
+                         f"{', '.join(sorted(_FIELDS))})")
     try:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
         value = raw
-    return check(dataclasses.replace(p, **{name: _coerce(name, value, "--param")}), "--param")
+    return check(dataclasses.replace(p, **{name: _coerce(name, value, "--param", "agent")}),
+                 "--param")

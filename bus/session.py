@@ -136,10 +136,14 @@ def open_session(args: argparse.Namespace, mode: str | None = None) -> zenoh.Ses
     try:
         return zenoh.open(conf)
     except Exception as e:
-        where = ", ".join(args.connect or [DEFAULT_ROUTER])
+        # name the endpoints this session was given (a bad --listen port is not the router's)
+        ends = [f"listen {', '.join(args.listen)}"] if args.listen else []
+        if args.connect or not args.listen:
+            ends.append(f"router {', '.join(args.connect or [DEFAULT_ROUTER])}")
+        hint = "Is the port valid and free?" if args.listen else "Is `swarmcover router` running?"
         raise ConnectionError(
             f"cannot open a Zenoh session ({mode or args.mode or args._zenoh_mode} mode, "
-            f"router {where}): {e}. Is `swarmcover router` running?") from None
+            f"{'; '.join(ends)}): {e}. {hint}") from None
 
 
 class Shutdown:

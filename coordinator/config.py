@@ -5,7 +5,9 @@ Lengths in metres (relative values are multiplied by rv), times in simulated sec
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
+
+from bus.configcheck import ConfigError, check_fields
 
 from .params import TopologyParams
 
@@ -91,24 +93,34 @@ class CoordinatorConfig:
 
     @classmethod
     def from_section(cls, section: dict | None, rv: float, where: str = "config") -> "CoordinatorConfig":
-        """Build from a raw ``[coordinator]`` dict; unknown keys are errors naming the key."""
-        section = dict(section or {})
-        known = {f.name for f in fields(cls)} - {"rv"}
-        bad = sorted(set(section) - known)
-        if bad:
-            raise ValueError(f"{where}: [coordinator] unknown field {bad[0]!r} "
-                             f"(known: {', '.join(sorted(known))})")
-        for f in fields(cls):
-            if f.name in section:
-                v = section[f.name]
-                want = type(f.default)
-                if want is float and isinstance(v, int) and not isinstance(v, bool):
-                    v = float(v)
-                if not isinstance(v, want) or (want is int and isinstance(v, bool)):
-                    raise ValueError(f"{where}: [coordinator] {f.name} = {v!r}: expected "
-                                     f"{want.__name__}")
-                section[f.name] = v
+        """Build from a raw ``[coordinator]`` dict. Unknown keys, wrong types, non-finite
+        numbers and values out of range are ConfigErrors naming file, section, field, value."""
+        vals = check_fields(cls, section, where, "coordinator", bounds=_BOUNDS,
+                            choices={"push_mode": ("parallel", "sequential")}, skip=("rv",))
         try:
-            return cls(rv=rv, **section)
+            return cls(rv=rv, **vals)
         except ValueError as e:
-            raise ValueError(f"{where}: {e}") from None
+            raise ConfigError(where, "coordinator", "", None, str(e)) from None
+
+
+# (lo, hi[, lo_open, hi_open]) per field; fields not listed only need a finite value of
+# their type. Lengths in rv, times in simulated seconds.
+_BOUNDS = {
+    "eps_rv": (0.0, 1.0, False, True),
+    "beta_deg": (0.0, 30.0),
+    "n_touch": (1, 360),
+    "w_obstacle": (0.0, 1e6, True),
+    "d_td_rv": (0.0, 10.0, True),
+    "wall_keep_rv": (0.0, 10.0),
+    "redundancy_period": (1, 10**9),
+    "scale_correct_period": (1, 10**9),
+    "max_paths": (1, 10**6),
+    "td_retries": (0, 1000),
+    "robots_max": (1, 10**6),
+    "task_timeout_s": (0.0, 1e9, True),
+    "spawn_timeout_s": (0.0, 1e9, True),
+    "settle_s": (0.0, 1e6),
+    "dead_after_cycles": (1, 10**9),
+    "dead_grace_s": (0.0, 1e6),
+    "max_cycles": (1, 10**12),
+}

@@ -61,6 +61,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from bus.configcheck import Checker, ConfigError  # one style for every section
+
 from .frames import UP_AXES, Transform2D
 from .mocap import MOCAP_TYPES
 from .ros2 import ROS_MAPPINGS, check_ros_name
@@ -77,10 +79,6 @@ ROBOT_KEYS = {"id", "body", "kind", "output", "ros_mapping", "ros_namespace", "v
 FAKE_KEYS = {"latency_s", "v_noise", "w_noise", "slip", "mocap_rate_hz", "mocap_noise_m",
              "mocap_noise_rad", "seed", "cmd_timeout_s"}
 TRANSFORM_KEYS = {"yaw", "tx", "ty", "scale"}
-
-
-class ConfigError(ValueError):
-    """A bad run config; the message names file, section, field and value."""
 
 
 @dataclass(frozen=True)
@@ -166,47 +164,29 @@ class BridgeConfig:
         return self.geofence
 
 
-class _Ctx:
+class _Ctx(Checker):
+    """The common checks (bus/configcheck.py), read from a dict with a default."""
+
     def __init__(self, path: str, section: str):
-        self.path, self.section = path, section
+        super().__init__(path, section)
+        self.path = path
 
-    def err(self, fld: str, value: Any, why: str) -> ConfigError:
-        return ConfigError(f"{self.path}: [{self.section}] {fld} = {value!r}: {why}")
+    def get_num(self, d: dict, key: str, default: float, lo: float = -math.inf,
+                hi: float = math.inf, strict_lo: bool = False) -> float:
+        return self.num(key, d.get(key, default), lo, hi, lo_open=strict_lo)
 
-    def num(self, d: dict, key: str, default: float, lo: float = -math.inf, hi: float = math.inf,
-            strict_lo: bool = False) -> float:
-        v = d.get(key, default)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise self.err(key, v, "expected a finite number")
-        if v < lo or v > hi or (strict_lo and v == lo):
-            rng = f"{'(' if strict_lo else '['}{lo:g}, {hi:g}]"
-            raise self.err(key, v, f"outside {rng}")
-        return float(v)
-
-    def int_(self, d: dict, key: str, default: int | None, lo: int = 0, hi: int = 2**31) -> int:
+    def get_int(self, d: dict, key: str, default: int | None, lo: int = 0,
+                hi: int = 2**31) -> int:
         v = d.get(key, default)
         if v is None:
             raise self.err(key, v, "missing (required)")
-        if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-            raise self.err(key, v, f"expected an integer in [{lo}, {hi}]")
-        return v
+        return self.int_(key, v, lo, hi)
 
-    def choice(self, d: dict, key: str, default: str, choices) -> str:
-        v = d.get(key, default)
-        if v not in choices:
-            raise self.err(key, v, f"not one of {', '.join(choices)}")
-        return v
+    def get_choice(self, d: dict, key: str, default: str, choices) -> str:
+        return self.choice(key, d.get(key, default), choices)
 
-    def bool_(self, d: dict, key: str, default: bool) -> bool:
-        v = d.get(key, default)
-        if not isinstance(v, bool):
-            raise self.err(key, v, "expected true or false")
-        return v
-
-    def unknown(self, d: dict, allowed: set) -> None:
-        extra = sorted(set(d) - allowed)
-        if extra:
-            raise self.err(extra[0], d[extra[0]], f"unknown field (known: {', '.join(sorted(allowed))})")
+    def get_bool(self, d: dict, key: str, default: bool) -> bool:
+        return self.bool_(key, d.get(key, default))
 
 
 def _points(v: Any, ctx: _Ctx, key: str, n: int = 2) -> tuple:
@@ -226,9 +206,9 @@ def load(path: str | Path) -> BridgeConfig:
         with open(path, "rb") as f:
             doc = tomllib.load(f)
     except OSError as e:
-        raise ConfigError(f"{path}: cannot read: {e.strerror}") from None
+        raise ConfigError(path, "", "", None, f"cannot read: {e.strerror}") from None
     except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: not valid TOML: {e}") from None
+        raise ConfigError(path, "", "", None, f"not valid TOML: {e}") from None
     return from_dict(doc, path)
 
 
@@ -237,24 +217,25 @@ def loads(text: str, path: str = "<config>") -> BridgeConfig:
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: not valid TOML: {e}") from None
+        raise ConfigError(path, "", "", None, f"not valid TOML: {e}") from None
     return from_dict(doc, path)
 
 
 def from_dict(doc: dict, path: str = "<config>") -> BridgeConfig:
-    top = _Ctx(path, "top level")
-    rv = top.num(doc, "rv", 1.0, 0.0, 1e6, strict_lo=True)
+    top = _Ctx(path, "")
+    rv = top.get_num(doc, "rv", 1.0, 0.0, 1e6, strict_lo=True)
     name = doc.get("name", Path(path).stem)
     hb = doc.get("hwbridge")
     if not isinstance(hb, dict):
-        raise ConfigError(f"{path}: no [hwbridge] section (needed by the hardware bridge)")
+        raise ConfigError(path, "", "", None,
+                          "no [hwbridge] section (needed by the hardware bridge)")
     c = _Ctx(path, "hwbridge")
     c.unknown(hb, TOP_KEYS)
 
     robots_sec = doc.get("robots", {}) if isinstance(doc.get("robots"), dict) else {}
     rc = _Ctx(path, "robots")
-    default_v = rc.num(robots_sec, "v_max", 0.3, 0.0, 100.0, strict_lo=True)
-    default_w = rc.num(robots_sec, "w_max", 2.0, 0.0, 100.0, strict_lo=True)
+    default_v = rc.get_num(robots_sec, "v_max", 0.3, 0.0, 100.0, strict_lo=True)
+    default_w = rc.get_num(robots_sec, "w_max", 2.0, 0.0, 100.0, strict_lo=True)
 
     # map boundary and sources (read only; owned by world/)
     map_sec = doc.get("map", {}) if isinstance(doc.get("map"), dict) else {}
@@ -282,8 +263,8 @@ def from_dict(doc: dict, path: str = "<config>") -> BridgeConfig:
         raise c.err("transform", tr, "expected a table {yaw, tx, ty, scale}")
     tc = _Ctx(path, "hwbridge.transform")
     tc.unknown(tr, TRANSFORM_KEYS)
-    transform = Transform2D(tc.num(tr, "yaw", 0.0), tc.num(tr, "tx", 0.0), tc.num(tr, "ty", 0.0),
-                            tc.num(tr, "scale", 1.0, 0.0, 1e6, strict_lo=True))
+    transform = Transform2D(tc.get_num(tr, "yaw", 0.0), tc.get_num(tr, "tx", 0.0), tc.get_num(tr, "ty", 0.0),
+                            tc.get_num(tr, "scale", 1.0, 0.0, 1e6, strict_lo=True))
 
     geof = hb.get("geofence", "map")
     if geof == "none" or geof is False:
@@ -313,15 +294,15 @@ def from_dict(doc: dict, path: str = "<config>") -> BridgeConfig:
     fc = _Ctx(path, "hwbridge.fake")
     fc.unknown(fk, FAKE_KEYS)
     fake = FakeParams(
-        latency_s=fc.num(fk, "latency_s", 0.03, 0.0, 10.0),
-        v_noise=fc.num(fk, "v_noise", 0.05, 0.0, 1.0),
-        w_noise=fc.num(fk, "w_noise", 0.05, 0.0, 1.0),
-        slip=fc.num(fk, "slip", 0.05, 0.0, 0.9),
-        mocap_rate_hz=fc.num(fk, "mocap_rate_hz", 100.0, 0.0, 1e4, strict_lo=True),
-        mocap_noise_m=fc.num(fk, "mocap_noise_m", 0.001, 0.0, 1.0),
-        mocap_noise_rad=fc.num(fk, "mocap_noise_rad", 0.002, 0.0, 1.0),
-        seed=fc.int_(fk, "seed", 0, 0, 2**31),
-        cmd_timeout_s=fc.num(fk, "cmd_timeout_s", 0.5, 0.0, 10.0, strict_lo=True),
+        latency_s=fc.get_num(fk, "latency_s", 0.03, 0.0, 10.0),
+        v_noise=fc.get_num(fk, "v_noise", 0.05, 0.0, 1.0),
+        w_noise=fc.get_num(fk, "w_noise", 0.05, 0.0, 1.0),
+        slip=fc.get_num(fk, "slip", 0.05, 0.0, 0.9),
+        mocap_rate_hz=fc.get_num(fk, "mocap_rate_hz", 100.0, 0.0, 1e4, strict_lo=True),
+        mocap_noise_m=fc.get_num(fk, "mocap_noise_m", 0.001, 0.0, 1.0),
+        mocap_noise_rad=fc.get_num(fk, "mocap_noise_rad", 0.002, 0.0, 1.0),
+        seed=fc.get_int(fk, "seed", 0, 0, 2**31),
+        cmd_timeout_s=fc.get_num(fk, "cmd_timeout_s", 0.5, 0.0, 10.0, strict_lo=True),
     )
 
     rl = hb.get("robots")
@@ -334,7 +315,7 @@ def from_dict(doc: dict, path: str = "<config>") -> BridgeConfig:
         if not isinstance(r, dict):
             raise ctx.err("", r, "expected a table")
         ctx.unknown(r, ROBOT_KEYS)
-        rid = ctx.int_(r, "id", None, 0, 2**31)
+        rid = ctx.get_int(r, "id", None, 0, 2**31)
         body = r.get("body")
         if not isinstance(body, str) or not body or "/" in body or any(ch in body for ch in "*$?#"):
             raise ctx.err("body", body, "expected a non-empty mocap body name without / * $ ? #")
@@ -344,9 +325,9 @@ def from_dict(doc: dict, path: str = "<config>") -> BridgeConfig:
             raise ctx.err("body", body, "duplicate mocap body name")
         seen_ids.add(rid)
         seen_bodies.add(body)
-        kind = ctx.choice(r, "kind", "diffdrive", KINDS)
-        output = ctx.choice(r, "output", "zenoh", OUTPUTS)
-        mapping = ctx.choice(r, "ros_mapping", "ros2dds", ROS_MAPPINGS)
+        kind = ctx.get_choice(r, "kind", "diffdrive", KINDS)
+        output = ctx.get_choice(r, "output", "zenoh", OUTPUTS)
+        mapping = ctx.get_choice(r, "ros_mapping", "ros2dds", ROS_MAPPINGS)
         rns = r.get("ros_namespace", "/" + body)
         try:
             check_ros_name(rns, "ros_namespace")
@@ -359,33 +340,33 @@ def from_dict(doc: dict, path: str = "<config>") -> BridgeConfig:
             start = _points([start], ctx, "start", 3)[0]
         robots.append(LiveRobot(
             id=rid, body=body, kind=kind, output=output, ros_mapping=mapping, ros_namespace=rns,
-            v_max=ctx.num(r, "v_max", default_v, 0.0, 100.0, strict_lo=True),
-            w_max=ctx.num(r, "w_max", default_w, 0.0, 100.0, strict_lo=True),
-            source=ctx.int_(r, "source", 0, 0, 1000),
-            fake=ctx.bool_(r, "fake", False), start=start))
+            v_max=ctx.get_num(r, "v_max", default_v, 0.0, 100.0, strict_lo=True),
+            w_max=ctx.get_num(r, "w_max", default_w, 0.0, 100.0, strict_lo=True),
+            source=ctx.get_int(r, "source", 0, 0, 1000),
+            fake=ctx.get_bool(r, "fake", False), start=start))
 
-    cmd_rate = c.num(hb, "cmd_rate_hz", 20.0, 0.0, 1000.0, strict_lo=True)
-    ttl = c.num(hb, "cmd_ttl_s", 0.3, 0.0, 10.0, strict_lo=True)
+    cmd_rate = c.get_num(hb, "cmd_rate_hz", 20.0, 0.0, 1000.0, strict_lo=True)
+    ttl = c.get_num(hb, "cmd_ttl_s", 0.3, 0.0, 10.0, strict_lo=True)
     if ttl < 2.0 / cmd_rate:
         raise c.err("cmd_ttl_s", hb.get("cmd_ttl_s", 0.3),
                     f"shorter than two command periods (2 / cmd_rate_hz = {2.0 / cmd_rate:g} s): "
                     f"a robot would stop between commands")
     return BridgeConfig(
         path=path, name=str(name), rv=rv, robots=tuple(robots), mocap=mocap,
-        up_axis=c.choice(hb, "up_axis", "z", UP_AXES), transform=transform,
-        kp=c.num(hb, "kp", 3.0, 0.0, 1e3, strict_lo=True),
-        k_theta=c.num(hb, "k_theta", 3.0, 0.0, 1e3, strict_lo=True),
-        feedforward=c.bool_(hb, "feedforward", False),
-        teleport_dist=c.num(hb, "teleport_dist", 0.2, 0.0, 1e3, strict_lo=True),
-        deadman_s=c.num(hb, "deadman_s", 0.3, 0.0, 60.0, strict_lo=True),
+        up_axis=c.get_choice(hb, "up_axis", "z", UP_AXES), transform=transform,
+        kp=c.get_num(hb, "kp", 3.0, 0.0, 1e3, strict_lo=True),
+        k_theta=c.get_num(hb, "k_theta", 3.0, 0.0, 1e3, strict_lo=True),
+        feedforward=c.get_bool(hb, "feedforward", False),
+        teleport_dist=c.get_num(hb, "teleport_dist", 0.2, 0.0, 1e3, strict_lo=True),
+        deadman_s=c.get_num(hb, "deadman_s", 0.3, 0.0, 60.0, strict_lo=True),
         geofence=geofence,
-        geofence_margin=c.num(hb, "geofence_margin", 0.0, 0.0, 1e3),
+        geofence_margin=c.get_num(hb, "geofence_margin", 0.0, 0.0, 1e3),
         rate_band_hz=(float(band[0]), float(band[1])),
-        silence_s=c.num(hb, "silence_s", 0.5, 0.0, 60.0, strict_lo=True),
-        rate_hz=c.num(hb, "rate_hz", 50.0, 0.0, 1000.0, strict_lo=True),
+        silence_s=c.get_num(hb, "silence_s", 0.5, 0.0, 60.0, strict_lo=True),
+        rate_hz=c.get_num(hb, "rate_hz", 50.0, 0.0, 1000.0, strict_lo=True),
         cmd_rate_hz=cmd_rate, cmd_ttl_s=ttl,
-        pose_rate_hz=c.num(hb, "pose_rate_hz", 10.0, 0.0, 1000.0, strict_lo=True),
-        k_omega=c.num(hb, "k_omega", 1.5, 0.0, 100.0, strict_lo=True),
-        k_v=c.num(hb, "k_v", 1.0, 0.0, 100.0, strict_lo=True),
-        ros_domain=c.int_(hb, "ros_domain", 0, 0, 232),
+        pose_rate_hz=c.get_num(hb, "pose_rate_hz", 10.0, 0.0, 1000.0, strict_lo=True),
+        k_omega=c.get_num(hb, "k_omega", 1.5, 0.0, 100.0, strict_lo=True),
+        k_v=c.get_num(hb, "k_v", 1.0, 0.0, 100.0, strict_lo=True),
+        ros_domain=c.get_int(hb, "ros_domain", 0, 0, 232),
         ros_bridge_namespace=ns, fake=fake, map_boundary=boundary, map_sources=sources, raw=doc)

@@ -436,29 +436,32 @@ class StallWatch:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    # every flag and every section is checked before any process starts: exit 2, one line
+    try:
+        from swarmcover.validate import check_run, prepare_out
+        checked = check_run(args)
+        cfg, resolved, wmap = checked.cfg, checked.resolved, checked.wmap
+        live_limits, swarm = checked.live_limits, checked.swarm
+        cfg, resolved, limits = default_robots_max(cfg, wmap, resolved)
+        out = prepare_out(Path(args.out or f"runs/{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"))
+        (out / "resolved.toml").write_text(resolved)
+    except (ValueError, OSError) as e:
+        print(f"swarmcover run: {' '.join(str(e).split())}", file=sys.stderr)
+        return 2
+    except Exception as e:  # noqa: BLE001 -- a config we cannot use is still not a traceback
+        print(f"swarmcover run: {args.config}: cannot use this config: {type(e).__name__}: "
+              f"{' '.join(str(e).split())}", file=sys.stderr)
+        return 2
     setup_logging(args.log_level, "swarmcover.run")
     if args.secure:  # children and our own session read it (bus.session --secure default)
         os.environ["SWARMCOVER_SECURE"] = os.path.abspath(args.secure)
-    try:
-        cfg, resolved = resolve_config(args.config, args)
-        from world.maps import build_map
-        wmap = build_map(cfg)
-        cfg, resolved, limits = default_robots_max(cfg, wmap, resolved)
-        live_limits = _live_limits(cfg, resolved, str(args.config))
-    except (ValueError, OSError) as e:
-        print(f"swarmcover run: {e}", file=sys.stderr)
-        return 2
-    swarm = args.swarm or "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in cfg.name)[:64] or "run"
-    out = Path(args.out or f"runs/{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}")
     logdir = out / "logs"
-    logdir.mkdir(parents=True, exist_ok=True)
-    (out / "resolved.toml").write_text(resolved)
     conf_path = str((out / "resolved.toml").resolve())
 
     if args.router:
         endpoint = args.router
     else:
-        port = args.port or (7447 if _port_free(7447) else _free_port())
+        port = args.port if args.port is not None else (7447 if _port_free(7447) else _free_port())
         endpoint = f"tcp/127.0.0.1:{port}"
     zargs = ["--connect", endpoint, "--swarm", swarm]
     launcher = Launcher(logdir, zargs)

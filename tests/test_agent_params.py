@@ -26,13 +26,13 @@ def test_reads_shared_sections_and_agent_section():
 
 
 @pytest.mark.parametrize("text, needle", [
-    ('[agent]\nspeed = 1\n', "run.toml [agent].speed = 1: unknown field"),
-    ('[agent]\nv_max = 1.0\n', "run.toml [agent].v_max = 1.0: unknown field (set it in [robots])"),
-    ('[agent]\ng0 = "big"\n', "run.toml [agent].g0 = 'big': expected float"),
-    ('[agent]\ng0 = -1\n', "g0 = -1.0 must be > 0"),
-    ('[robots]\nkind = "legged"\n', "kind = 'legged' not one of holonomic, diffdrive"),
-    ('[agent]\nhold_window = 2.5\n', "run.toml [agent].hold_window = 2.5: expected int"),
-    ('agent = 3\n', "[agent] is not a table"),
+    ('[agent]\nspeed = 1\n', "run.toml: [agent] speed = 1: unknown field"),
+    ('[agent]\nv_max = 1.0\n', "run.toml: [agent] v_max = 1.0: unknown field (set it in [robots])"),
+    ('[agent]\ng0 = "big"\n', "run.toml: [agent] g0 = 'big': expected a number"),
+    ('[agent]\ng0 = -1\n', "g0 = -1.0: must be > 0"),
+    ('[robots]\nkind = "legged"\n', "[robots] kind = 'legged': not one of holonomic, diffdrive"),
+    ('[agent]\nhold_window = 2.5\n', "run.toml: [agent] hold_window = 2.5: expected an integer"),
+    ('agent = 3\n', "[agent]: expected a table"),
     ('rv = [1\n', "run.toml: not valid TOML"),
 ])
 def test_errors_name_file_section_field_and_value(text, needle):
@@ -45,10 +45,10 @@ def test_cli_overrides():
     p = parse_override("g0=0.25", AgentParams())
     p = parse_override("align=on", p)
     assert p.g0 == 0.25 and p.align == "on" and p.aligned
-    with pytest.raises(ParamError, match="--param nope"):
+    with pytest.raises(ParamError, match=r"--param: \[agent\] nope"):
         parse_override("nope=1", p)
     with pytest.raises(ParamError, match="expected NAME=VALUE"):
         parse_override("g0", p)
-    with pytest.raises(ParamError, match="arrive_ticks = 0 must be >= 1"):
+    with pytest.raises(ParamError, match="arrive_ticks = 0: must be >= 1"):
         parse_override("arrive_ticks=0", p)
     assert from_config({}, "x") == AgentParams()

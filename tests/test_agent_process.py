@@ -108,4 +108,4 @@ def test_agent_reads_run_config_and_rejects_unknown_agent_keys(procs, zargs, tmp
     bad.write_text('[agent]\ngains = 3\n')
     b = start_agent(procs, zargs, 2, "--run-config", bad)
     assert b.wait(30) == 2
-    assert "bad.toml [agent].gains = 3: unknown field" in b.output()
+    assert "bad.toml: [agent] gains = 3: unknown field" in b.output()

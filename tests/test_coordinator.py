@@ -23,11 +23,11 @@ def _coverage(sim, res) -> float:
 
 
 def test_config_errors_name_the_field():
-    with pytest.raises(ValueError, match=r"\[coordinator\] unknown field 'push_mod'"):
+    with pytest.raises(ValueError, match=r"\[coordinator\] push_mod = 'parallel': unknown field"):
         CoordinatorConfig.from_section({"push_mod": "parallel"}, rv=1.0, where="x.toml")
     with pytest.raises(ValueError, match=r"push_mode = 'fast'"):
         CoordinatorConfig.from_section({"push_mode": "fast"}, rv=1.0)
-    with pytest.raises(ValueError, match=r"max_paths = '2': expected int"):
+    with pytest.raises(ValueError, match=r"max_paths = '2': expected an integer"):
         CoordinatorConfig.from_section({"max_paths": "2"}, rv=1.0)
     assert CoordinatorConfig.from_section({"task_timeout_s": 30}, rv=2.0).d0 == pytest.approx(1.8)
 

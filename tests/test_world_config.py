@@ -114,3 +114,105 @@ def test_bare_ros_yaml_gets_defaults_and_an_automatic_source():
     assert cfg.map.ros_map.endswith("office.yaml") and cfg.world.mode == "lockstep"
     assert len(wm.sources) == 1 and wm.info.get("auto_source")
     assert wm.is_free(wm.sources[:, :2], margin=0.5).all()   # well clear of every wall
+
+
+@pytest.mark.parametrize("extra,section,field,value", [
+    ("[coordinater]\nrobots_max = 5\n", "coordinater", "", None),
+    ("[run]\nx = 1\n", "run", "", None),
+])
+def test_unknown_sections_are_errors(tmp_path, extra, section, field, value):
+    p = write(tmp_path, BASE + extra)
+    with pytest.raises(ConfigError, match="unknown section") as ei:
+        load_config(p)
+    assert (ei.value.section, ei.value.field, ei.value.value) == (section, field, value)
+    assert f"[{section}]" in str(ei.value) and str(p) in str(ei.value)
+
+
+@pytest.mark.parametrize("text,field", [
+    ("rv = nan\n", "rv"),
+    ("rv = inf\n", "rv"),
+    ("[world]\ndt = nan\n", "dt"),
+    ("[world]\ntick_timeout_s = inf\n", "tick_timeout_s"),
+    ("[robots]\nv_max = -inf\n", "v_max"),
+    ("[sensing]\nnoise_deg = nan\n", "noise_deg"),
+])
+def test_nan_and_infinities_are_refused(tmp_path, text, field):
+    base = BASE.replace('rv = 1.0\n', '') if text.startswith("rv") else BASE
+    text = text + base if text.startswith("rv") else base + text
+    with pytest.raises(ConfigError, match="not finite") as ei:
+        load_config(write(tmp_path, text))
+    assert ei.value.field == field
+
+
+def test_polygons_must_be_simple(tmp_path):
+    bowtie = BASE.replace("[[0, 0], [4, 0], [4, 3], [0, 3]]", "[[0, 0], [4, 3], [4, 0], [0, 2]]")
+    with pytest.raises(ConfigError, match=r"\[map\] boundary = .*not a simple polygon: edge 0"):
+        load_config(write(tmp_path, bowtie))
+    obst = BASE.replace("sources", "obstacles = [{type = 'polygon', points = "
+                                   "[[1, 1], [2, 2], [2, 1], [1, 2]]}]\nsources")
+    with pytest.raises(ConfigError, match=r"\[map\] obstacles\[0\]\.points = .*not a simple"):
+        load_config(write(tmp_path, obst))
+    # collinear vertices and a non-convex simple polygon are fine
+    ok = BASE.replace("[[0, 0], [4, 0], [4, 3], [0, 3]]",
+                      "[[0, 0], [2, 0], [4, 0], [4, 3], [2, 1], [0, 3]]")
+    assert len(load_config(write(tmp_path, ok)).map.boundary) == 6
+
+
+def test_map_size_is_bounded_with_the_limit_stated(tmp_path):
+    from world.maps import MAX_MAP_AREA_RV2, MAX_MAP_SIDE_RV
+    huge = BASE.replace("[[0, 0], [4, 0], [4, 3], [0, 3]]",
+                        "[[0, 0], [1e6, 0], [1e6, 1e6], [0, 1e6]]")
+    with pytest.raises(ConfigError, match=f"limit of {MAX_MAP_SIDE_RV:g} rv") as ei:
+        build_map(load_config(write(tmp_path, huge)))
+    assert (ei.value.section, ei.value.field) == ("map", "boundary")
+    wide = BASE.replace("[[0, 0], [4, 0], [4, 3], [0, 3]]",
+                        "[[0, 0], [1000, 0], [1000, 100], [0, 100]]")
+    with pytest.raises(ConfigError, match=f"limit of {MAX_MAP_AREA_RV2:g} rv"):
+        build_map(load_config(write(tmp_path, wide)))
+    # the same map is fine with a larger rv (the limits are in rv)
+    assert build_map(load_config(write(tmp_path, wide.replace("rv = 1.0", "rv = 5.0")))) \
+        .bounds == (0.0, 0.0, 1000.0, 100.0)
+
+
+def test_ros_map_size_is_bounded_before_pixels_are_read(tmp_path):
+    img = tmp_path / "m.pgm"
+    img.write_bytes(b"P5\n20000 20000\n255\n" + bytes(1000))     # 1 KB claiming 400 M pixels
+    y = tmp_path / "m.yaml"
+    y.write_text("image: m.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n")
+    with pytest.raises(ConfigError, match="limit") as ei:
+        map_from_path(y)
+    assert (ei.value.section, ei.value.field) == ("ros_map", "image")
+    img.write_bytes((CONFIGS / "maps" / "office.pgm").read_bytes())
+    y.write_text("image: m.pgm\nresolution: 100000\norigin: [0, 0, 0]\n")
+    with pytest.raises(ConfigError, match="limit of 2000 rv") as ei:
+        map_from_path(y)
+    assert (ei.value.section, ei.value.field, ei.value.value) == ("ros_map", "resolution", 100000)
+
+
+def test_one_style_for_every_section():
+    """[map]..[world], [agent], [coordinator] and [hwbridge] raise the same ConfigError with
+    the same one-line message: file: [section] field = value: reason."""
+    from agents.params import ParamError, from_toml_text
+    from bus.configcheck import ConfigError as Common
+    from bus.configcheck import self_crossing
+    from coordinator.config import CoordinatorConfig
+    from hwbridge import config as hwconfig
+    assert ConfigError is Common and hwconfig.ConfigError is Common
+    assert issubclass(ParamError, Common)
+    errs = []
+    for make in (lambda: loads_config(BASE + "[world]\ndt = nan\n", "f.toml"),
+                 lambda: from_toml_text(BASE + "[agent]\ng0 = nan\n", "f.toml"),
+                 lambda: CoordinatorConfig.from_section({"settle_s": float("nan")}, 1.0, "f.toml"),
+                 lambda: hwconfig.loads(BASE + '[hwbridge]\nkp = nan\n[[hwbridge.robots]]\n'
+                                                'id = 1\nbody = "b"\n', "f.toml")):
+        with pytest.raises(Common) as ei:
+            make()
+        errs.append((ei.value.file, ei.value.section, str(ei.value)))
+    assert errs == [("f.toml", "world", "f.toml: [world] dt = nan: not finite"),
+                    ("f.toml", "agent", "f.toml: [agent] g0 = nan: not finite"),
+                    ("f.toml", "coordinator", "f.toml: [coordinator] settle_s = nan: not finite"),
+                    ("f.toml", "hwbridge", "f.toml: [hwbridge] kp = nan: not finite")]
+    # simple-polygon test: collinear runs are fine, folds and touching edges are not
+    assert self_crossing([[0, 0], [1, 0], [2, 0], [2, 1], [0, 1]]) is None
+    assert self_crossing([[0, 0], [2, 0], [1, 0], [1, 1]]) is not None        # folds back
+    assert self_crossing([[0, 0], [2, 0], [2, 2], [1, 0], [0, 2]]) is not None  # a vertex on an edge

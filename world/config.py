@@ -1,10 +1,11 @@
 """The shared run config: TOML (or a bare ROS map_server YAML) into frozen dataclasses.
 
 ``load_config(path) -> RunConfig`` parses and validates the sections the world owns
-([map], [robots], [sensing], [world]) plus the top-level ``name`` and ``rv``; every other
-table ([agent], [coordinator], [run], [hwbridge], ...) is kept as a raw dict in
-``RunConfig.sections`` for its owner to validate. Unknown keys inside the world's sections
-are errors that name the file, the section, the field and the value.
+([map], [robots], [sensing], [world]) plus the top-level ``name`` and ``rv``; the tables
+other components own ([agent], [coordinator], [hwbridge]) are kept as raw dicts in
+``RunConfig.sections`` for their owners to validate (``swarmcover.validate`` runs every
+owner's check before a run starts). Unknown sections, and unknown keys inside the world's
+sections, are errors that name the file, the section, the field and the value.
 
 ``to_toml(cfg)`` writes the resolved config (absolute ros_map path, every default filled
 in) as TOML text; this is what the world serves in ``WorldInfo.config``, and
@@ -21,21 +22,15 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+# one style for every section (ConfigError is re-exported for the world's callers)
+from bus.configcheck import Checker, ConfigError
+
 ROBOT_KINDS = ("holonomic", "diffdrive")
 MODES = ("lockstep", "realtime")
 WORLD_SECTIONS = ("map", "robots", "sensing", "world")
-
-
-class ConfigError(ValueError):
-    """A bad run config. The message names file, section, field and value."""
-
-    def __init__(self, file: str, section: str, fieldname: str, value: Any, reason: str):
-        self.file, self.section, self.field, self.value = file, section, fieldname, value
-        where = f"[{section}] " if section else ""
-        shown = repr(value)
-        if len(shown) > 120:
-            shown = shown[:117] + "..."
-        super().__init__(f"{file}: {where}{fieldname} = {shown}: {reason}")
+# tables other components own and validate: [agent] (agents/params.py), [coordinator]
+# (coordinator/config.py), [hwbridge] (hwbridge/config.py). Any other table is an error.
+OTHER_SECTIONS = ("agent", "coordinator", "hwbridge")
 
 
 # --------------------------------------------------------------------------- dataclasses
@@ -148,74 +143,8 @@ class RunConfig:
 
 # --------------------------------------------------------------------------- checks
 
-class _Ctx:
-    def __init__(self, file: str, section: str):
-        self.file, self.section = file, section
-
-    def err(self, name: str, value: Any, reason: str) -> ConfigError:
-        return ConfigError(self.file, self.section, name, value, reason)
-
-    def num(self, name, v, lo=-math.inf, hi=math.inf, lo_open=False) -> float:
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise self.err(name, v, "expected a number")
-        v = float(v)
-        if not math.isfinite(v):
-            raise self.err(name, v, "not finite")
-        if v < lo or v > hi or (lo_open and v == lo):
-            lo_s = f"({lo}" if lo_open else f"[{lo}"
-            raise self.err(name, v, f"outside {lo_s}, {hi}]")
-        return v
-
-    def int_(self, name, v, lo=-(2**62), hi=2**62) -> int:
-        if isinstance(v, bool) or not isinstance(v, int):
-            raise self.err(name, v, "expected an integer")
-        if v < lo or v > hi:
-            raise self.err(name, v, f"outside [{lo}, {hi}]")
-        return v
-
-    def bool_(self, name, v) -> bool:
-        if not isinstance(v, bool):
-            raise self.err(name, v, "expected true or false")
-        return v
-
-    def choice(self, name, v, choices) -> str:
-        if not isinstance(v, str) or v not in choices:
-            raise self.err(name, v, f"expected one of {', '.join(choices)}")
-        return v
-
-    def point(self, name, v) -> tuple:
-        if not isinstance(v, (list, tuple)) or len(v) != 2:
-            raise self.err(name, v, "expected a point [x, y]")
-        return (self.num(name, v[0], -1e6, 1e6), self.num(name, v[1], -1e6, 1e6))
-
-    def polygon(self, name, v) -> tuple:
-        if not isinstance(v, (list, tuple)) or len(v) < 3:
-            raise self.err(name, v, "expected a polygon: a list of at least 3 points [x, y]")
-        pts = tuple(self.point(f"{name}[{k}]", p) for k, p in enumerate(v))
-        if abs(_shoelace(pts)) < 1e-12:
-            raise self.err(name, v, "polygon has zero area")
-        return pts
-
-    def table(self, name, v) -> dict:
-        if not isinstance(v, dict):
-            raise self.err(name, v, "expected a table")
-        return v
-
-
-def _shoelace(pts) -> float:
-    s = 0.0
-    n = len(pts)
-    for k in range(n):
-        x0, y0 = pts[k]
-        x1, y1 = pts[(k + 1) % n]
-        s += x0 * y1 - x1 * y0
-    return 0.5 * s
-
-
-def _check_keys(ctx: _Ctx, d: dict, allowed) -> None:
-    for k in d:
-        if k not in allowed:
-            raise ctx.err(k, d[k], f"unknown field (known: {', '.join(sorted(allowed))})")
+class _Ctx(Checker):
+    """The world's sections use the common checks (finite numbers, simple polygons)."""
 
 
 # --------------------------------------------------------------------------- sections
@@ -223,7 +152,7 @@ def _check_keys(ctx: _Ctx, d: dict, allowed) -> None:
 def _parse_map(d: dict, file: str, base_dir: str) -> MapConfig:
     ctx = _Ctx(file, "map")
     allowed = {f.name for f in fields(MapConfig)}
-    _check_keys(ctx, d, allowed)
+    ctx.unknown(d, allowed)
     boundary = ros_map = None
     if "boundary" in d and "ros_map" in d:
         raise ctx.err("ros_map", d["ros_map"], "give either boundary or ros_map, not both")
@@ -251,19 +180,19 @@ def _parse_map(d: dict, file: str, base_dir: str) -> MapConfig:
         ctx.table(name, o)
         t = o.get("type")
         if t == "rect":
-            _check_keys(ctx, o, {"type", "min", "max"})
+            ctx.unknown(o, {"type", "min", "max"})
             lo = ctx.point(f"{name}.min", o.get("min"))
             hi = ctx.point(f"{name}.max", o.get("max"))
             if not (hi[0] > lo[0] and hi[1] > lo[1]):
                 raise ctx.err(f"{name}.max", o.get("max"), "must exceed min in x and y")
             obstacles.append(Obstacle("rect", points=(lo, hi)))
         elif t == "circle":
-            _check_keys(ctx, o, {"type", "center", "radius"})
+            ctx.unknown(o, {"type", "center", "radius"})
             c = ctx.point(f"{name}.center", o.get("center"))
             r = ctx.num(f"{name}.radius", o.get("radius"), 0.0, 1e6, lo_open=True)
             obstacles.append(Obstacle("circle", center=c, radius=r))
         elif t == "polygon":
-            _check_keys(ctx, o, {"type", "points"})
+            ctx.unknown(o, {"type", "points"})
             obstacles.append(Obstacle("polygon", points=ctx.polygon(f"{name}.points",
                                                                     o.get("points"))))
         else:
@@ -275,7 +204,7 @@ def _parse_map(d: dict, file: str, base_dir: str) -> MapConfig:
     for k, s in enumerate(src):
         name = f"sources[{k}]"
         ctx.table(name, s)
-        _check_keys(ctx, s, {"x", "y", "theta"})
+        ctx.unknown(s, {"x", "y", "theta"})
         if "x" not in s or "y" not in s:
             raise ctx.err(name, s, "needs x and y")
         sources.append((ctx.num(f"{name}.x", s["x"], -1e6, 1e6),
@@ -292,7 +221,7 @@ def _parse_map(d: dict, file: str, base_dir: str) -> MapConfig:
 
 def _parse_robots(d: dict, file: str) -> RobotsConfig:
     ctx = _Ctx(file, "robots")
-    _check_keys(ctx, d, {f.name for f in fields(RobotsConfig)})
+    ctx.unknown(d, {f.name for f in fields(RobotsConfig)})
     dflt = RobotsConfig()
     return RobotsConfig(
         radius=ctx.num("radius", d.get("radius", dflt.radius), 0.0, 100.0, lo_open=True),
@@ -304,7 +233,7 @@ def _parse_robots(d: dict, file: str) -> RobotsConfig:
 
 def _parse_sensing(d: dict, file: str) -> SensingConfig:
     ctx = _Ctx(file, "sensing")
-    _check_keys(ctx, d, {f.name for f in fields(SensingConfig)})
+    ctx.unknown(d, {f.name for f in fields(SensingConfig)})
     dflt = SensingConfig()
     return SensingConfig(
         rate_hz=ctx.num("rate_hz", d.get("rate_hz", dflt.rate_hz), 0.0, 1e4, lo_open=True),
@@ -317,7 +246,7 @@ def _parse_sensing(d: dict, file: str) -> SensingConfig:
 
 def _parse_world(d: dict, file: str) -> WorldConfig:
     ctx = _Ctx(file, "world")
-    _check_keys(ctx, d, {f.name for f in fields(WorldConfig)})
+    ctx.unknown(d, {f.name for f in fields(WorldConfig)})
     dflt = WorldConfig()
     spawn = []
     sp = d.get("spawn", [])
@@ -327,7 +256,7 @@ def _parse_world(d: dict, file: str) -> WorldConfig:
     for k, s in enumerate(sp):
         name = f"spawn[{k}]"
         ctx.table(name, s)
-        _check_keys(ctx, s, {"robot", "source", "kind", "live", "pose"})
+        ctx.unknown(s, {"robot", "source", "kind", "live", "pose"})
         if "robot" not in s:
             raise ctx.err(name, s, "needs robot (an id)")
         rid = ctx.int_(f"{name}.robot", s["robot"], 0, 2**62)
@@ -374,6 +303,9 @@ def parse_config(d: dict, path: str = "<config>", base_dir: str = ".") -> RunCon
             continue
         if not isinstance(v, dict):
             raise ctx.err(k, v, "unknown top-level field (known: name, rv, and tables)")
+        if k not in OTHER_SECTIONS:
+            raise ConfigError(path, k, "", None, "unknown section (known: " + ", ".join(
+                f"[{n}]" for n in WORLD_SECTIONS + OTHER_SECTIONS) + ")")
         sections[k] = copy.deepcopy(v)
     for s in WORLD_SECTIONS:
         if s in d and not isinstance(d[s], dict):

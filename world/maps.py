@@ -25,6 +25,50 @@ import numpy as np
 
 from .config import ConfigError, RunConfig, load_config
 
+# Size limits, checked before anything is allocated. Ground truth rasters the map at rv/20
+# (400 cells per rv^2, a few bytes each, several arrays) and sensing grids it at rv/2:
+# a 200 rv x 200 rv box is 16 M coverage cells. A 10^6 m map used to allocate 4.7 GB and die.
+MAX_MAP_SIDE_RV = 2_000.0          # longest side of the map's bounding box, in rv
+MAX_MAP_AREA_RV2 = 40_000.0        # bounding-box area, in rv^2 (e.g. 200 m x 200 m at rv 1 m)
+MAX_IMAGE_PIXELS = 50_000_000      # ROS map image (its float copy is 8 bytes a pixel)
+
+
+def check_extent(file: str, section: str, fieldname: str, value, bounds, rv: float) -> None:
+    """Refuse a map whose bounding box (x0, y0, x1, y1) exceeds the size limits."""
+    x0, y0, x1, y1 = (float(v) for v in bounds)
+    w, h = x1 - x0, y1 - y0
+    if not all(math.isfinite(v) for v in (w, h)):
+        raise ConfigError(file, section, fieldname, value, "map extent is not finite")
+    if max(w, h) > MAX_MAP_SIDE_RV * rv:
+        raise ConfigError(file, section, fieldname, value,
+                          f"map is {w:.6g} m x {h:.6g} m: a side is longer than the limit of "
+                          f"{MAX_MAP_SIDE_RV:g} rv ({MAX_MAP_SIDE_RV * rv:g} m at rv = {rv:g} m)")
+    if w * h > MAX_MAP_AREA_RV2 * rv * rv:
+        raise ConfigError(file, section, fieldname, value,
+                          f"map is {w:.6g} m x {h:.6g} m: its bounding box exceeds the limit of "
+                          f"{MAX_MAP_AREA_RV2:g} rv^2 ({MAX_MAP_AREA_RV2 * rv * rv:g} m^2 at "
+                          f"rv = {rv:g} m)")
+
+
+def ros_image_size(meta) -> tuple[int, int]:
+    """(width, height) of a ROS map image from its header alone; refuses images over
+    MAX_IMAGE_PIXELS (or that PIL calls a decompression bomb) before any pixel is read."""
+    from PIL import Image, UnidentifiedImageError
+    try:
+        with Image.open(meta.image) as im:
+            w, h = im.size
+    except Image.DecompressionBombError as e:
+        raise ConfigError(meta.yaml_path, "ros_map", "image", meta.image,
+                          f"image too large (limit {MAX_IMAGE_PIXELS:,} pixels): {e}") from None
+    except (UnidentifiedImageError, OSError, ValueError) as e:
+        raise ConfigError(meta.yaml_path, "ros_map", "image", meta.image,
+                          f"cannot read image: {e}") from None
+    if w * h > MAX_IMAGE_PIXELS:
+        raise ConfigError(meta.yaml_path, "ros_map", "image", meta.image,
+                          f"image is {w} x {h} pixels: more than the limit of "
+                          f"{MAX_IMAGE_PIXELS:,} pixels")
+    return w, h
+
 # --------------------------------------------------------------------------- geometry
 
 
@@ -420,10 +464,11 @@ def read_ros_yaml(path) -> RosMapMeta:
 def ros_free_mask(meta: RosMapMeta) -> np.ndarray:
     """Free cells of the image, bool (H, W), image row 0 at the top (as stored)."""
     from PIL import Image, UnidentifiedImageError
+    ros_image_size(meta)
     try:
         im = Image.open(meta.image)
         im.load()
-    except (UnidentifiedImageError, OSError) as e:
+    except (UnidentifiedImageError, OSError, ValueError, Image.DecompressionBombError) as e:
         raise ConfigError(meta.yaml_path, "ros_map", "image", meta.image,
                           f"cannot read image: {e}") from None
     alpha = None
@@ -675,6 +720,10 @@ def build_map(cfg: RunConfig) -> WorldMap:
             extra.append(np.array(o.points, float))
     info: dict = {}
     if m.ros_map is not None:
+        meta = read_ros_yaml(m.ros_map)
+        w, h = ros_image_size(meta)
+        check_extent(meta.yaml_path, "ros_map", "resolution", meta.resolution,
+                     (0.0, 0.0, w * meta.resolution, h * meta.resolution), cfg.rv)
         seeds = [s[:2] for s in m.sources]
         boundary, holes, info = load_ros_map(
             m.ros_map, seeds=seeds, simplify=m.simplify, min_hole_area=m.min_hole_area,
@@ -683,6 +732,8 @@ def build_map(cfg: RunConfig) -> WorldMap:
         disjoint = not extra
     else:
         boundary = np.array(m.boundary, float)
+        check_extent(cfg.path, "map", "boundary", [list(p) for p in m.boundary],
+                     (*boundary.min(0), *boundary.max(0)), cfg.rv)
         obstacles = extra
         disjoint = _disjoint(boundary, obstacles)
     wm = WorldMap(cfg.name, boundary, obstacles, np.zeros((0, 3)), disjoint, info)
