@@ -13,8 +13,16 @@ its own threads) only reads that store. Endpoints:
   /map     the map JSON (WorldInfo as polygons), refetched when ``map_version`` changes
   /healthz "ok"
 Robots alive are the liveliness tokens ``alive/robot/*``; robots drawn are the bodies in
-the latest Truth. The page exposes ``window.swarmState`` ({robots_drawn, robots_alive,
-cycle, ...}) and mirrors it into ``<pre id="swarm-state">`` for headless tests.
+the latest Truth. The page zooms (wheel, +/-) and pans (drag; double-click resets), shows a
+robot's id and state on hover, pauses (space or the button), draws a scale bar, and while
+nothing has arrived says which swarm and router it listens to. It exposes
+``window.swarmState`` ({robots_drawn, robots_alive, cycle, px_per_m, hover, paused, ...})
+and mirrors it into ``<pre id="swarm-state">`` for headless tests.
+
+``--foxglove`` also serves the same scene as swarmcover/scene.py's ``foxglove.SceneUpdate``
+on topic ``/swarmcover/scene`` through foxglove-sdk's WebSocket server (``--foxglove-port``,
+default 8766): in Foxglove or Lichtblick, "Open connection" -> Foxglove WebSocket ->
+``ws://127.0.0.1:8766``, and add a 3D panel.
 """
 from __future__ import annotations
 
@@ -227,10 +235,19 @@ class ViewServer:
     """
 
     def __init__(self, session, keys: Keys, *, host: str = "127.0.0.1", port: int = 8765,
-                 max_hz: float = 10.0, coverage: str = "auto", info_retry_s: float = 2.0):
+                 max_hz: float = 10.0, coverage: str = "auto", info_retry_s: float = 2.0,
+                 router: str = "", foxglove_port: int | None = None):
         from bus.session import Mailbox, Receiver
         self.session = session
         self.keys = keys
+        self.router = router
+        self.scene = None
+        self.fox_server = None
+        self.fox_channel = None
+        self._scene_seq = -1
+        self._scene_at = -1e9
+        if foxglove_port is not None:
+            self._start_foxglove(host, foxglove_port)
         self.state = LiveState(coverage=coverage)
         self.store = Snapshot()
         self.mailbox = Mailbox(maxsize=100_000)
@@ -248,6 +265,38 @@ class ViewServer:
         self.httpd = ThreadingHTTPServer((host, port), make_handler(self.store, template))
         self.httpd.daemon_threads = True
         self._http_thread: threading.Thread | None = None
+
+    def _start_foxglove(self, host: str, port: int) -> None:
+        import foxglove
+        from foxglove.channels import SceneUpdateChannel
+
+        from swarmcover.scene import SCENE_TOPIC, SceneState
+        self.scene = SceneState()
+        self.fox_context = foxglove.Context()
+        self.fox_channel = SceneUpdateChannel(SCENE_TOPIC, context=self.fox_context)
+        self.fox_server = foxglove.start_server(name=f"swarmcover {self.keys.swarm}", host=host,
+                                                port=port, context=self.fox_context)
+
+    @property
+    def foxglove_url(self) -> str | None:
+        if self.fox_server is None:
+            return None
+        host = self.httpd.server_address[0]
+        return f"ws://{host}:{self.fox_server.port}"
+
+    def _log_scene(self, now: float) -> None:
+        """Log the scene to the Foxglove server when it changed (and once a second anyway,
+        for clients that joined since: the protocol keeps no last message)."""
+        sc = self.scene
+        if sc is None or not sc.ready:
+            return
+        if now - self._scene_at < self.min_dt or (sc.seq == self._scene_seq
+                                                  and now - self._scene_at < 1.0):
+            return
+        self._scene_at = now
+        self._scene_seq = sc.seq
+        t_ns = time.time_ns()
+        self.fox_channel.log(sc.update(t_ns), log_time=t_ns)
 
     @property
     def url(self) -> str:
@@ -277,6 +326,8 @@ class ViewServer:
                 msg = self.receiver.decode(str(s.key_expr), s.payload.to_bytes(), m.WorldInfo)
                 if msg is not None:
                     self.state.set_info(msg)
+                    if self.scene is not None:
+                        self.scene.on_message(msg)
         except Exception as e:  # a failed query only delays the map
             log.warning("world/info query failed: %s", e)
 
@@ -290,6 +341,8 @@ class ViewServer:
             msg = self.receiver.decode(key, payload)
             if msg is not None:
                 self.state.on_message(key, msg)
+                if self.scene is not None:
+                    self.scene.on_message(msg)
             n += 1
         for key, _payload, kind in self.tokens.drain():
             present = kind == zenoh.SampleKind.PUT
@@ -304,6 +357,7 @@ class ViewServer:
             self._query_info()
         self.state.update_coverage(now)
         self._publish()
+        self._log_scene(now)
         return n
 
     def _publish(self, force: bool = False) -> None:
@@ -317,9 +371,18 @@ class ViewServer:
         if st.map_version != self._published_map:
             mp = map_json(st.info, st.map_version)
             self._published_map = st.map_version
-        self.store.put(st.snapshot(), mp)
+        snap = st.snapshot()
+        snap["swarm"] = self.keys.swarm
+        snap["router"] = self.router
+        self.store.put(snap, mp)
 
     def close(self) -> None:
+        if self.fox_server is not None:
+            try:
+                self.fox_server.stop()
+            except Exception:
+                pass
+            self.fox_server = None
         for s in self._subs:
             try:
                 s.undeclare()
@@ -346,11 +409,19 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--coverage", choices=KINDS, default="auto",
                    help="coverage shown in the header (default auto)")
     p.add_argument("--max-hz", type=float, default=10.0, help="state updates per second at most")
+    p.add_argument("--foxglove", action="store_true",
+                   help="also serve the scene to Foxglove/Lichtblick over foxglove-sdk's "
+                        "WebSocket server (topic /swarmcover/scene)")
+    p.add_argument("--foxglove-port", type=int, default=8766, metavar="PORT",
+                   help="WebSocket port of --foxglove (default 8766; 0 = any free)")
     p.add_argument("--log-level", default="INFO")
     add_zenoh_args(p)
     args = p.parse_args(argv)
     setup_logging(args.log_level, "swarmcover.view")
     keys = keys_from_args(args)
+    from bus.session import DEFAULT_ROUTER
+    router = ", ".join(args.connect or ([] if args.mode in ("peer", "router")
+                                        else [DEFAULT_ROUTER])) or f"{args.mode} mode"
     try:
         session = open_session(args)
     except (ValueError, ConnectionError) as e:
@@ -361,13 +432,19 @@ def main(argv: list[str] | None = None) -> int:
         with Shutdown() as stop:
             try:
                 view = ViewServer(session, keys, host=args.host, port=args.port,
-                                  max_hz=args.max_hz, coverage=args.coverage)
+                                  max_hz=args.max_hz, coverage=args.coverage, router=router,
+                                  foxglove_port=args.foxglove_port if args.foxglove else None)
             except OSError as e:
                 log.error("--host %s --port %d: cannot serve: %s", args.host, args.port, e)
                 return 2
+            except RuntimeError as e:  # foxglove-sdk: port taken, bad host
+                log.error("--foxglove-port %d: cannot serve: %s", args.foxglove_port, e)
+                return 2
             view.start()
+            if view.foxglove_url:
+                print(f"READY foxglove {view.foxglove_url}", flush=True)
             print(f"READY view {view.url}", flush=True)
-            log.info("live view of %s at %s", keys.prefix, view.url)
+            log.info("live view of %s (router %s) at %s", keys.prefix, router, view.url)
             while not stop.is_set():
                 view.pump(0.05)
     finally:
