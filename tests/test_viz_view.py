@@ -257,3 +257,61 @@ def test_browser_waits_naming_swarm_and_router_then_zooms_pauses_and_shows_ids(
         _wait(cdp, lambda s: s["hover"] is None, "hover cleared off the robots")
     finally:
         cdp.close()
+
+
+def test_foxglove_websocket_client_receives_scene_updates(router, zargs, procs):
+    """A client speaking Foxglove's WebSocket protocol (what Foxglove and Lichtblick do)
+    subscribes to /swarmcover/scene of ``view --foxglove`` during a run and decodes the
+    SceneUpdates with the advertised protobuf schema."""
+    import base64
+    import struct
+
+    from mcap.records import Schema
+    from mcap_protobuf.decoder import DecoderFactory
+    from websockets.sync.client import connect
+
+    synth = procs.start(SYNTH + ["--cycles", str(CYCLES), "--cycle-s", "0.15", "--hold", "60",
+                                 "--kill", f"{KILL[0]}:{KILL[1]}", *zargs])
+    synth.wait_line("READY synth", timeout=30)
+    view = procs.swarmcover("view", "--port", free_port(), "--foxglove", "--foxglove-port",
+                            free_port(), *zargs)
+    ws_url = view.wait_line("READY foxglove", timeout=30).split()[-1]
+    view.wait_line("READY view", timeout=30)
+    expected = Scenario(kills={KILL[0]: [KILL[1]]}).present(CYCLES - 1)
+    with connect(ws_url, subprotocols=["foxglove.sdk.v1"], max_size=None,
+                 open_timeout=20) as ws:
+        assert ws.subprotocol == "foxglove.sdk.v1"
+        channel = None
+        deadline = time.monotonic() + 20
+        while channel is None and time.monotonic() < deadline:
+            msg = ws.recv(timeout=20)
+            if isinstance(msg, str):
+                d = json.loads(msg)
+                if d.get("op") == "advertise":
+                    channel = next((c for c in d["channels"]
+                                    if c["topic"] == "/swarmcover/scene"), None)
+        assert channel is not None and channel["encoding"] == "protobuf"
+        assert channel["schemaName"] == "foxglove.SceneUpdate"
+        decode = DecoderFactory().decoder_for("protobuf", Schema(
+            id=1, name=channel["schemaName"], encoding="protobuf",
+            data=base64.b64decode(channel["schema"])))
+        ws.send(json.dumps({"op": "subscribe",
+                            "subscriptions": [{"id": 7, "channelId": channel["id"]}]}))
+        updates, ids = 0, []
+        deadline = time.monotonic() + 40
+        while time.monotonic() < deadline:
+            msg = ws.recv(timeout=20)
+            if not isinstance(msg, bytes) or msg[0] != 1:
+                continue
+            sub, _log_time = struct.unpack_from("<IQ", msg, 1)
+            assert sub == 7
+            scene = decode(msg[13:])
+            updates += 1
+            ents = {e.id: e for e in scene.entities}
+            meta = {kv.key: kv.value for kv in ents["robots"].metadata}
+            ids = [int(i) for i in meta["ids"].split(",") if i]
+            if ids == expected and meta.get("cycle") == str(CYCLES - 1):
+                assert len(ents["robots"].spheres) == len(expected)
+                assert ents["walls"].lines and ents["edges"].lines
+                break
+    assert updates >= 1 and ids == expected, (updates, ids, expected)
