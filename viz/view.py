@@ -22,7 +22,8 @@ and mirrors it into ``<pre id="swarm-state">`` for headless tests.
 ``--foxglove`` also serves the same scene as swarmcover/scene.py's ``foxglove.SceneUpdate``
 on topic ``/swarmcover/scene`` through foxglove-sdk's WebSocket server (``--foxglove-port``,
 default 8766): in Foxglove or Lichtblick, "Open connection" -> Foxglove WebSocket ->
-``ws://127.0.0.1:8766``, and add a 3D panel.
+``ws://127.0.0.1:8766``, and add a 3D panel. ``--ros2`` publishes the swarm to ROS 2 over
+Zenoh as rmw_zenoh does (swarmcover/ros2.py).
 """
 from __future__ import annotations
 
@@ -236,7 +237,8 @@ class ViewServer:
 
     def __init__(self, session, keys: Keys, *, host: str = "127.0.0.1", port: int = 8765,
                  max_hz: float = 10.0, coverage: str = "auto", info_retry_s: float = 2.0,
-                 router: str = "", foxglove_port: int | None = None):
+                 router: str = "", foxglove_port: int | None = None,
+                 ros2: dict | None = None):
         from bus.session import Mailbox, Receiver
         self.session = session
         self.keys = keys
@@ -246,8 +248,14 @@ class ViewServer:
         self.fox_channel = None
         self._scene_seq = -1
         self._scene_at = -1e9
+        self.ros2 = None
+        self._ros2_seq = -1
+        self._ros2_at = -1e9
         if foxglove_port is not None:
             self._start_foxglove(host, foxglove_port)
+        if ros2 is not None:
+            from swarmcover.ros2 import Ros2Out
+            self.ros2 = Ros2Out(session, **ros2)
         self.state = LiveState(coverage=coverage)
         self.store = Snapshot()
         self.mailbox = Mailbox(maxsize=100_000)
@@ -297,6 +305,17 @@ class ViewServer:
         self._scene_seq = sc.seq
         t_ns = time.time_ns()
         self.fox_channel.log(sc.update(t_ns), log_time=t_ns)
+
+    def _ros2_publish(self, now: float) -> None:
+        st = self.state
+        if self.ros2 is None or st.seq == self._ros2_seq or now - self._ros2_at < self.min_dt:
+            return
+        self._ros2_at = now
+        self._ros2_seq = st.seq
+        try:
+            self.ros2.publish(st.info, st.truth, st.cx, st.mocap, time.time_ns())
+        except Exception as e:  # an output, never fatal to the view
+            log.warning("ROS 2 publish failed: %s", e)
 
     @property
     def url(self) -> str:
@@ -358,6 +377,7 @@ class ViewServer:
         self.state.update_coverage(now)
         self._publish()
         self._log_scene(now)
+        self._ros2_publish(now)
         return n
 
     def _publish(self, force: bool = False) -> None:
@@ -377,6 +397,9 @@ class ViewServer:
         self.store.put(snap, mp)
 
     def close(self) -> None:
+        if self.ros2 is not None:
+            self.ros2.close()
+            self.ros2 = None
         if self.fox_server is not None:
             try:
                 self.fox_server.stop()
@@ -414,6 +437,14 @@ def main(argv: list[str] | None = None) -> int:
                         "WebSocket server (topic /swarmcover/scene)")
     p.add_argument("--foxglove-port", type=int, default=8766, metavar="PORT",
                    help="WebSocket port of --foxglove (default 8766; 0 = any free)")
+    p.add_argument("--ros2", action="store_true",
+                   help="also publish to ROS 2 over Zenoh as rmw_zenoh does: <ns>/poses "
+                        "(geometry_msgs/PoseArray) and <ns>/complex "
+                        "(visualization_msgs/MarkerArray), frame 'map'")
+    p.add_argument("--ros-domain", type=int, default=0, metavar="N",
+                   help="ROS_DOMAIN_ID of --ros2 (default 0)")
+    p.add_argument("--ros-namespace", default="/swarmcover", metavar="NS",
+                   help="ROS namespace of the --ros2 topics (default /swarmcover)")
     p.add_argument("--log-level", default="INFO")
     add_zenoh_args(p)
     args = p.parse_args(argv)
@@ -433,7 +464,13 @@ def main(argv: list[str] | None = None) -> int:
             try:
                 view = ViewServer(session, keys, host=args.host, port=args.port,
                                   max_hz=args.max_hz, coverage=args.coverage, router=router,
-                                  foxglove_port=args.foxglove_port if args.foxglove else None)
+                                  foxglove_port=args.foxglove_port if args.foxglove else None,
+                                  ros2=({"domain": args.ros_domain,
+                                         "namespace": args.ros_namespace}
+                                        if args.ros2 else None))
+            except ValueError as e:  # --ros-domain / --ros-namespace
+                log.error("%s", e)
+                return 2
             except OSError as e:
                 log.error("--host %s --port %d: cannot serve: %s", args.host, args.port, e)
                 return 2
@@ -443,6 +480,8 @@ def main(argv: list[str] | None = None) -> int:
             view.start()
             if view.foxglove_url:
                 print(f"READY foxglove {view.foxglove_url}", flush=True)
+            if view.ros2 is not None:
+                print("READY ros2 " + " ".join(view.ros2.topics.values()), flush=True)
             print(f"READY view {view.url}", flush=True)
             log.info("live view of %s (router %s) at %s", keys.prefix, router, view.url)
             while not stop.is_set():
