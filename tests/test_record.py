@@ -375,3 +375,22 @@ print('EXIT', rec.messages, flush=True)
                        text=True, timeout=60)
     assert "EXIT 5" in r.stdout, r.stdout + r.stderr
     assert [r.data for r in read_messages(out)] == [m.Demo(seq=i).encode() for i in range(5)]
+
+
+@pytest.mark.timeout(300)
+def test_recorded_tiny_run_opens_in_the_tools_with_the_final_robots_in_the_scene(procs,
+                                                                                  tmp_path):
+    """`run --record` on the tiny map: the mcap package decodes every channel of run.mcap,
+    and the scene's last update shows the robots of the last Truth (the ones alive at the
+    end), ids included."""
+    from procs import free_port
+    out = tmp_path / "run"
+    p = procs.swarmcover("run", "configs/tiny.toml", "--out", str(out), "--quiet", "--record",
+                         "--port", str(free_port()))
+    assert p.wait(280) == 0, p.output()[-3000:]
+    summary = json.loads((out / "summary.json").read_text())
+    truths = [r for r in read_messages(out / "run.mcap", topics=None)
+              if r.kind == "put" and r.key.endswith("/world/truth")]
+    last = m.decode(truths[-1].data)
+    assert summary["certified"] and len(last.ids) >= summary["ideal_count"] == 7
+    check_tools_decode_every_channel(out / "run.mcap", last)
