@@ -12,8 +12,8 @@ the transport latency). It keeps executing its last command until
 told otherwise (like a robot driver without a watchdog), so the bridge's deadman is what
 stops it.
 
-With ``--config`` it takes its output, ROS namespace, start pose, mocap frame and noise
-parameters from the run config's [hwbridge] section (flags override).
+With a run config (``CONFIG`` or ``--run-config``) it takes its output, ROS namespace,
+start pose, mocap frame and noise parameters from its [hwbridge] section (flags override).
 """
 from __future__ import annotations
 
@@ -124,7 +124,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="swarmcover fake-robot", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--id", type=int, required=True, help="robot id (as in [hwbridge.robots])")
-    p.add_argument("--body", default=None, help="mocap rigid-body name (default: from --config)")
+    p.add_argument("--body", default=None, help="mocap rigid-body name (default: from the run config)")
     p.add_argument("run_config", nargs="?", metavar="CONFIG",
                    help="run config (TOML) to take the [hwbridge] settings of this robot from")
     p.add_argument("--run-config", "-c", dest="run_config_opt", metavar="CONFIG",
