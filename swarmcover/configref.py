@@ -342,6 +342,25 @@ def docs_markdown() -> str:
     return "\n".join(out)
 
 
+def complete_resolved_toml(text: str, path: str = "<resolved>") -> str:
+    """A resolved run config (world/config.py ``to_toml``) with its [agent] and [coordinator]
+    tables filled in with every value the agents and coordinator use (defaults included),
+    so ``resolved.toml`` records the whole run. Other tables are kept as they are."""
+    import tomllib
+
+    from agents.params import from_config
+    from coordinator.config import CoordinatorConfig
+    from world.config import dumps_toml
+    raw = tomllib.loads(text)
+    agent = from_config(raw, path)
+    coord = CoordinatorConfig.from_section(raw.get("coordinator"), raw.get("rv", 1.0), path)
+    raw["agent"] = {f.name: getattr(agent, f.name) for f in dataclasses.fields(agent)
+                    if f.name not in _AGENT_SKIP}
+    raw["coordinator"] = {f.name: getattr(coord, f.name) for f in dataclasses.fields(coord)
+                          if f.name != "rv"}
+    return dumps_toml(raw)
+
+
 def check_text(text: str, path: str = "<config>", base_dir: str = ".") -> list[str]:
     """Validate a run config as its owners do; returns the sections checked. Raises
     ValueError (the owners' errors) naming file, section, field and value."""

@@ -99,3 +99,21 @@ def test_examples_config_checks_and_topology_example_certifies():
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "10 vertices" in out.stdout and "bounds a 2-chain: True" in out.stdout
+
+
+def test_completed_resolved_toml_holds_every_agent_and_coordinator_value():
+    from agents.params import AgentParams, from_config
+    from coordinator.config import CoordinatorConfig
+    from swarmcover.configref import complete_resolved_toml
+    from world.config import load_config, to_toml
+    cfg = load_config(ROOT / "configs" / "small.toml")
+    full = complete_resolved_toml(to_toml(cfg))
+    raw = tomllib.loads(full)
+    assert len(raw["agent"]) == len(dataclasses.fields(AgentParams)) - 7
+    assert len(raw["coordinator"]) == len(dataclasses.fields(CoordinatorConfig)) - 1
+    # the values are the ones the components resolve from the original file
+    orig = tomllib.loads((ROOT / "configs" / "small.toml").read_text())
+    assert from_config(raw) == from_config(orig)
+    assert (CoordinatorConfig.from_section(raw["coordinator"], cfg.rv)
+            == CoordinatorConfig.from_section(orig.get("coordinator"), cfg.rv))
+    check_text(full)
