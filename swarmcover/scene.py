@@ -11,6 +11,7 @@ draws the whole swarm (a 3D panel needs no plugin and no history):
               metadata ``ids`` / ``live`` list the robot ids drawn (comma separated)
   robot_ids   the id of each robot as a text label
   redundant   purple cubes on robots whose vertex is redundant (being removed)
+  removed     grey cubes on robots removed as redundant (outside the complex since)
   mocap       red spheres: measured (motion-capture) poses of live robots
   edges       thin dark lines: the Rips edges of the latest Complex
   frontier    red lines: frontier edges K
@@ -33,13 +34,14 @@ from bus import messages as m
 
 SCENE_TOPIC = "/swarmcover/scene"
 FRAME = "map"
-ENTITIES = ("walls", "sources", "robots", "robot_ids", "redundant", "mocap", "edges",
+ENTITIES = ("walls", "sources", "robots", "robot_ids", "redundant", "removed", "mocap", "edges",
             "frontier", "obstacle", "coverage")
 
 _C = {
     "wall": (0.25, 0.25, 0.25, 1.0), "source": (1.0, 0.55, 0.0, 1.0),
     "virtual": (0.12, 0.47, 0.71, 1.0), "live": (0.17, 0.63, 0.17, 1.0),
     "outside": (0.6, 0.75, 0.9, 1.0), "redundant": (0.58, 0.40, 0.74, 1.0),
+    "removed": (0.5, 0.5, 0.5, 1.0),
     "mocap": (0.84, 0.15, 0.16, 1.0), "edge": (0.2, 0.2, 0.2, 0.8),
     "frontier": (0.89, 0.10, 0.11, 1.0), "obstacle": (0.0, 0.35, 0.85, 1.0),
     "coverage": (0.55, 0.80, 0.55, 0.35), "text": (0.05, 0.05, 0.05, 1.0),
@@ -86,6 +88,7 @@ class SceneState:
         self.truth: m.Truth | None = None
         self.cx: m.Complex | None = None
         self.mocap: dict[int, tuple[float, float, float]] = {}
+        self.removed: set[int] = set()   # robots marked redundant so far
         self.seq = 0   # bumped on every change that alters the scene
 
     def on_message(self, msg: m.Message) -> bool:
@@ -97,6 +100,8 @@ class SceneState:
                 del self.mocap[r]
         elif isinstance(msg, m.Complex):
             self.cx = msg
+            occ = dict(zip(msg.vertices, msg.occupants))
+            self.removed |= {occ[v] for v in msg.redundant if occ.get(v, -1) >= 0}
         elif isinstance(msg, m.WorldInfo):
             self.info = msg
         elif isinstance(msg, m.Pose) and msg.source == "mocap":
@@ -119,7 +124,8 @@ class SceneState:
         rv = info.rv if info is not None else 1.0
         rad = info.robot_radius if info is not None and info.robot_radius > 0 else 0.05 * rv
         line_w = max(0.01, 0.02 * rv)
-        sc = build_scene(self.truth, self.cx, {r: p[:2] for r, p in self.mocap.items()})
+        sc = build_scene(self.truth, self.cx, {r: p[:2] for r, p in self.mocap.items()},
+                         removed=self.removed)
 
         def ent(eid: str, **kw) -> fm.SceneEntity:
             return fm.SceneEntity(timestamp=ts, frame_id=FRAME, id=eid, **kw)
@@ -140,9 +146,10 @@ class SceneState:
                 arrows.append(fm.ArrowPrimitive(pose=_pose(x, y, 0.0, th), shaft_length=0.6 * rv,
                                                 shaft_diameter=0.08 * rv, head_length=0.2 * rv,
                                                 head_diameter=0.2 * rv, color=_col("source")))
-        spheres, texts, cubes = [], [], []
+        spheres, texts, cubes, gone = [], [], [], []
         d = 2 * rad
-        for i, (x, y), lv, inc, red in zip(sc.ids, sc.xy, sc.live, sc.in_complex, sc.redundant):
+        for i, (x, y), lv, inc, red, rm in zip(sc.ids, sc.xy, sc.live, sc.in_complex,
+                                               sc.redundant, sc.removed):
             colour = "live" if lv else ("virtual" if inc else "outside")
             spheres.append(fm.SpherePrimitive(pose=_pose(x, y, rad), color=_col(colour),
                                               size=fm.Vector3(x=d, y=d, z=d)))
@@ -152,6 +159,10 @@ class SceneState:
             if red:
                 cubes.append(fm.CubePrimitive(pose=_pose(x, y, rad), color=_col("redundant"),
                                               size=fm.Vector3(x=1.6 * d, y=1.6 * d, z=0.4 * d)))
+            if rm and not inc:
+                gone.append(fm.CubePrimitive(pose=_pose(x, y, rad, math.pi / 4),
+                                             color=_col("removed"),
+                                             size=fm.Vector3(x=1.3 * d, y=1.3 * d, z=0.3 * d)))
         mocap = [fm.SpherePrimitive(pose=_pose(x, y, rad), color=_col("mocap"),
                                     size=fm.Vector3(x=0.6 * d, y=0.6 * d, z=0.6 * d))
                  for _, (x, y, _th) in sorted(self.mocap.items())]
@@ -170,6 +181,7 @@ class SceneState:
             ent("robots", spheres=spheres, metadata=meta),
             ent("robot_ids", texts=texts),
             ent("redundant", cubes=cubes),
+            ent("removed", cubes=gone),
             ent("mocap", spheres=mocap),
             lines("edges", _seg_points(sc.edges, 0.005), "edge", 0.5 * line_w),
             lines("frontier", _seg_points(sc.frontier, 0.01), "frontier", 2 * line_w),

@@ -315,3 +315,34 @@ def test_foxglove_websocket_client_receives_scene_updates(router, zargs, procs):
                 assert ents["walls"].lines and ents["edges"].lines
                 break
     assert updates >= 1 and ids == expected, (updates, ids, expected)
+
+
+def test_robots_removed_as_redundant_keep_their_own_mark_in_page_and_scene():
+    from bus import messages as m
+    from swarmcover.scene import SceneState
+    truth = m.Truth(tick=1, t=0.0, ids=[0, 1, 2, 3], x=[0.0, 1.0, 0.5, 3.0],
+                    y=[0.0, 0.0, 0.8, 3.0], theta=[0.0] * 4, live=[False] * 4)
+    first = m.Complex(cycle=1, vertices=[10, 11, 12, 13], occupants=[0, 1, 2, 3],
+                      edges=[10, 11, 10, 12, 11, 12, 12, 13], triangles=[10, 11, 12],
+                      redundant=[13])
+    later = m.Complex(cycle=2, vertices=[10, 11, 12], occupants=[0, 1, 2],
+                      edges=[10, 11, 10, 12, 11, 12], triangles=[10, 11, 12])
+    st, sc = LiveState(coverage="none"), SceneState()
+    for msg in (truth, first):
+        st.on_message("k", msg)
+        sc.on_message(msg)
+    assert [r[5] for r in st.snapshot()["robots"]] == [0, 0, 0, 1]  # marked redundant
+    assert [r[7] for r in st.snapshot()["robots"]] == [0, 0, 0, 0]  # still in the complex
+    st.on_message("k", later)
+    sc.on_message(later)
+    assert [r[7] for r in st.snapshot()["robots"]] == [0, 0, 0, 1]  # removed: own mark
+    from mcap.records import Schema
+    from mcap_protobuf.decoder import DecoderFactory
+
+    from swarmcover.scene import scene_schema
+    sch = scene_schema()
+    decode = DecoderFactory().decoder_for("protobuf", Schema(id=1, name=sch.name,
+                                                             encoding=sch.encoding, data=sch.data))
+    ents = {e.id: e for e in decode(sc.update(1).encode()).entities}
+    assert len(ents["removed"].cubes) == 1 and len(ents["redundant"].cubes) == 0
+    assert ents["removed"].cubes[0].pose.position.x == 3.0

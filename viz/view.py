@@ -79,6 +79,7 @@ class LiveState:
         self.cx: m.Complex | None = None
         self.mocap: dict[int, tuple[float, float]] = {}
         self.alive: set[int] = set()
+        self.removed: set[int] = set()   # robots marked redundant so far (history)
         self.roles: dict[str, bool] = {r: False for r in _ROLES}
         self.coverage_fn, self.coverage_label = coverage_measure(coverage)
         self.coverage: float | None = None
@@ -100,6 +101,8 @@ class LiveState:
             self._cov_dirty = True
         elif isinstance(msg, m.Complex):
             self.cx = msg
+            occ = dict(zip(msg.vertices, msg.occupants))
+            self.removed |= {occ[v] for v in msg.redundant if occ.get(v, -1) >= 0}
         elif isinstance(msg, m.Pose):
             if msg.source == "mocap":
                 self.mocap[msg.robot] = (msg.x, msg.y)
@@ -135,11 +138,13 @@ class LiveState:
                 self.seq += 1
 
     def snapshot(self) -> dict:
-        """The page's state JSON: robots as [id, x, y, live, in_complex, redundant, alive]."""
-        sc = build_scene(self.truth, self.cx, self.mocap)
-        robots = [[int(i), _r(x), _r(y), int(lv), int(inc), int(red), int(int(i) in self.alive)]
-                  for i, (x, y), lv, inc, red in zip(sc.ids, sc.xy, sc.live, sc.in_complex,
-                                                     sc.redundant)]
+        """The page's state JSON: robots as [id, x, y, live, in_complex, redundant, alive,
+        removed] (removed: taken out of the complex as redundant, now outside it)."""
+        sc = build_scene(self.truth, self.cx, self.mocap, removed=self.removed)
+        robots = [[int(i), _r(x), _r(y), int(lv), int(inc), int(red), int(int(i) in self.alive),
+                   int(rm and not inc)]
+                  for i, (x, y), lv, inc, red, rm in zip(sc.ids, sc.xy, sc.live, sc.in_complex,
+                                                         sc.redundant, sc.removed)]
         seg = lambda a: a.reshape(-1, 4).round(4).tolist()  # noqa: E731
         cx = self.cx
         return {"seq": self.seq, "map_version": self.map_version,
