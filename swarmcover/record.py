@@ -46,7 +46,6 @@ from collections import Counter
 from pathlib import Path
 from typing import Iterable
 
-import msgpack
 import msgspec
 from mcap.writer import CompressionType, Writer
 
@@ -152,7 +151,7 @@ def payload_to_json(payload: bytes) -> tuple[bytes, str | None]:
     payload = bytes(payload)
     try:
         d = _MP_DEC.decode(payload)
-        if isinstance(d, dict):
+        if isinstance(d, dict) and list(d) != [RAW_FIELD]:  # that one would read as raw
             js = _JS_ENC.encode(d)
             if _MP_ENC.encode(_JS_DEC.decode(js)) == payload:
                 t = d.get("_t")
@@ -168,16 +167,6 @@ def json_to_payload(data: bytes) -> bytes:
     if isinstance(d, dict) and len(d) == 1 and RAW_FIELD in d:
         return base64.b64decode(d[RAW_FIELD])
     return _MP_ENC.encode(d)
-
-
-def _peek_tag(payload: bytes) -> str | None:
-    """The ``_t`` of a msgpack map payload, or None (no validation)."""
-    try:
-        d = msgpack.unpackb(payload, raw=False, strict_map_key=False)
-    except Exception:
-        return None
-    t = d.get("_t") if isinstance(d, dict) else None
-    return t if isinstance(t, str) else None
 
 
 # --------------------------------------------------------------------------- sink

@@ -110,7 +110,8 @@ def test_json_conversion_is_byte_exact_and_lossless_for_odd_payloads():
         assert m.decode(json_to_payload(data)) == msg
     odd = [b"", b"\xc1", msgpack.packb({"x": float("nan")}), msgpack.packb({1: 2}),
            msgpack.packb({"b": b"\x00\x01"}, use_bin_type=True),
-           b"\x81\xa1x\xca\x3f\x80\x00\x00"]  # float32 1.0: JSON would repack as float64
+           b"\x81\xa1x\xca\x3f\x80\x00\x00",  # float32 1.0: JSON would repack as float64
+           msgpack.packb({"_msgpack_b64": "aGk="})]  # a map that looks like the raw form
     for p in odd:
         data, tag = payload_to_json(p)
         json.loads(data)  # strict JSON
@@ -249,7 +250,6 @@ def check_tools_decode_every_channel(path, last_truth: m.Truth) -> None:
 
 
 def test_replay_honours_swarm_and_prints_the_recorded_one(router, procs, tmp_path):
-    sc = Scenario()
     src, dst = Keys("recorded" + uuid.uuid4().hex[:6]), Keys("other" + uuid.uuid4().hex[:6])
     path = tmp_path / "s.mcap"
     with McapSink(path, metadata={"swarm": src.swarm}) as sink:
