@@ -53,9 +53,15 @@ def scene_schema() -> Schema:
     return fm.SceneUpdate.get_schema()
 
 
+_COLOURS: dict[str, fm.Color] = {}
+
+
 def _col(name: str) -> fm.Color:
-    r, g, b, a = _C[name]
-    return fm.Color(r=r, g=g, b=b, a=a)
+    c = _COLOURS.get(name)
+    if c is None:
+        r, g, b, a = _C[name]
+        c = _COLOURS[name] = fm.Color(r=r, g=g, b=b, a=a)
+    return c
 
 
 def _pose(x: float = 0.0, y: float = 0.0, z: float = 0.0, yaw: float = 0.0) -> fm.Pose:
