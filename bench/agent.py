@@ -8,7 +8,7 @@ that applies the agent's commands). Phases: ``hold`` (station keeping) and ``got
 (homing), each first as a burst (CPU seconds per message, from /proc/<pid>/stat) and then
 at 20 Hz for a few seconds (share of one core, idle Zenoh threads included).
 
-    /work/venv/bin/python bench/agent.py [--burst 1500] [--rate-s 6]
+    python bench/agent.py [--burst 1500] [--rate-s 6]      (the venv's python, from the repo root)
 
 Progress goes to stderr; the last line on stdout is one JSON object.
 """

@@ -14,7 +14,7 @@ Two parts, each with the twin's velocity feed-forward off (the thesis's pure P s
     discrepancy (bearing difference, real vs simulated formation), mocap transport
     latency, and the bridge's CPU share.
 
-    /work/venv/bin/python bench/hwbridge.py [--seconds 20] [--skip-procs]
+    python bench/hwbridge.py [--seconds 20] [--skip-procs]      (the venv's python, from the repo root)
 
 Progress goes to stderr; the last line on stdout is one JSON object.
 """

@@ -7,8 +7,12 @@
    Python) and (b) a ``Recorder`` on the same key space; throughput of each until the
    last message is delivered / written.
 3. plot load: ``viz.plot.load_run`` over a recording vs ``replay.read_messages`` alone.
+4. writers: the same JSON messages plus foxglove.SceneUpdates written with the ``mcap``
+   package's Writer (what McapSink uses) vs foxglove-sdk's own MCAP writer (Rust), and the
+   share of a recording's time the scene costs; also the JSON format vs the old msgpack
+   channels (sink time and file size).
 
-    /work/venv/bin/python bench/record.py [--n 20000]
+    python bench/record.py [--n 20000]        (the venv's python, from the repo root)
 
 Progress goes to stderr; the last line on stdout is one JSON object.
 """
@@ -180,6 +184,86 @@ def bench_plot_load(tmp: Path, cycles: int = 200) -> dict:
             "load_vs_read_time_ratio": load / base}
 
 
+def bench_writers(items, tmp: Path, scenes: int = 200) -> dict:
+    """mcap package Writer vs foxglove-sdk's MCAP writer for what a recording holds."""
+    import foxglove
+    from mcap.writer import CompressionType, Writer
+
+    from swarmcover.record import McapSink, payload_to_json, schema_bytes
+    from swarmcover.scene import SCENE_TOPIC, SceneState, scene_schema
+    from viz.synth import Scenario
+    sc = Scenario(n_max=60)
+    st = SceneState()
+    st.on_message(sc.info)
+    st.on_message(sc.truth(40, 0.5, 1, 0.1))
+    st.on_message(sc.complex(40, 0.1))
+    t = time.perf_counter()
+    updates = [st.update(1_000 + i) for i in range(scenes)]
+    build = time.perf_counter() - t
+    conv = [(k, payload_to_json(d)[0], m.decode(d).TAG) for k, d in items]
+    out = {"scene_build_ms": 1e3 * build / scenes}
+
+    t = time.perf_counter()
+    with open(tmp / "w_mcap.mcap", "wb") as f:
+        w = Writer(f, compression=CompressionType.ZSTD)
+        w.start(profile="swarmcover", library="bench")
+        chans, sids = {}, {}
+        for i, (k, js, tag) in enumerate(conv):
+            c = chans.get(k)
+            if c is None:
+                if tag not in sids:
+                    sids[tag] = w.register_schema(tag, "jsonschema", schema_bytes(m.REGISTRY[tag]))
+                c = chans[k] = w.register_channel(k, "json", sids[tag])
+            w.add_message(c, log_time=i, data=js, publish_time=i)
+        sch = scene_schema()
+        sc_c = w.register_channel(SCENE_TOPIC, "protobuf",
+                                  w.register_schema(sch.name, sch.encoding, sch.data))
+        for i, u in enumerate(updates):
+            w.add_message(sc_c, log_time=i, data=u.encode(), publish_time=i)
+        w.finish()
+    out["mcap_pkg_s"] = time.perf_counter() - t
+
+    ctx = foxglove.Context()
+    t = time.perf_counter()
+    with foxglove.open_mcap(tmp / "w_fox.mcap", context=ctx, allow_overwrite=True):
+        chans = {}
+        for i, (k, js, tag) in enumerate(conv):
+            c = chans.get(k)
+            if c is None:
+                c = chans[k] = foxglove.Channel(k, message_encoding="json", context=ctx,
+                                                schema=foxglove.Schema(
+                                                    name=tag, encoding="jsonschema",
+                                                    data=schema_bytes(m.REGISTRY[tag])))
+            c.log(js, log_time=i)
+        sc_c = foxglove.channels.SceneUpdateChannel(SCENE_TOPIC, context=ctx)
+        for i, u in enumerate(updates):
+            sc_c.log(u, log_time=i)
+    out["foxglove_sdk_s"] = time.perf_counter() - t
+    out["foxglove_vs_mcap_pkg_time_ratio"] = out["foxglove_sdk_s"] / out["mcap_pkg_s"]
+    out["mcap_pkg_bytes"] = (tmp / "w_mcap.mcap").stat().st_size
+    out["foxglove_sdk_bytes"] = (tmp / "w_fox.mcap").stat().st_size
+    # the JSON format against the msgpack channels recordings had before
+    t = time.perf_counter()
+    with open(tmp / "old.mcap", "wb") as f:
+        w = Writer(f, compression=CompressionType.ZSTD)
+        w.start(profile="swarmcover", library="bench")
+        chans = {}
+        for i, (k, d) in enumerate(items):
+            c = chans.get(k) or chans.setdefault(k, w.register_channel(k, "msgpack", 0))
+            w.add_message(c, log_time=i, data=d, publish_time=i)
+        w.finish()
+    old = time.perf_counter() - t
+    t = time.perf_counter()
+    with McapSink(tmp / "new.mcap") as sink:
+        for i, (k, d) in enumerate(items):
+            sink.write(k, d, i)
+    new = time.perf_counter() - t
+    out["json_vs_msgpack_sink_time_ratio"] = new / old
+    out["json_vs_msgpack_size_ratio"] = ((tmp / "new.mcap").stat().st_size
+                                         / (tmp / "old.mcap").stat().st_size)
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--n", type=int, default=20000, help="messages per measurement")
@@ -197,6 +281,9 @@ def main() -> int:
         eprint("plot load bench ...")
         out["plot_load"] = bench_plot_load(tmp)
         eprint(json.dumps(out["plot_load"]))
+        eprint("writer bench ...")
+        out["writers"] = bench_writers(items, tmp)
+        eprint(json.dumps(out["writers"]))
     print(json.dumps(out))
     return 0
 

@@ -1,6 +1,6 @@
 """Benchmark: world sensing + physics per tick, against a naive all-pairs ray cast.
 
-    /work/venv/bin/python bench/world.py [--robots 1000] [--ticks 300] [--naive-ticks 3]
+    python bench/world.py [--robots 1000] [--ticks 300] [--naive-ticks 3]      (the venv's python, from the repo root)
 
 A 40 m x 30 m room with 20 obstacles (rectangles, circles, polygons) and N robots (30 %
 differential drive) wandering with random velocity commands. One tick = physics step (dt,

@@ -39,9 +39,9 @@ log = logging.getLogger("swarmcover.hwbridge.mocap")
 
 MOCAP_TYPES = ("zenoh", "scripted", "motioncapture")
 INSTALL_HINT = ("the 'motioncapture' package (libmotioncapture) is needed for mocap type "
-                "'motioncapture': install it with `/work/venv/bin/pip install motioncapture` "
-                "(binary wheels for Linux/macOS/Windows on PyPI; sources at "
-                "https://github.com/IMRCLab/libmotioncapture)")
+                "'motioncapture': install it into swarmcover's environment with "
+                "`pip install motioncapture` (binary wheels for Linux/macOS/Windows on PyPI; "
+                "sources at https://github.com/IMRCLab/libmotioncapture)")
 
 
 @dataclass(frozen=True, slots=True)

@@ -121,11 +121,22 @@ class Twist:
 
 
 def encode_twist(tw: Twist) -> bytes:
-    """CDR little endian: header 00 01 00 00, then 6 float64 (52 bytes in all)."""
+    """CDR little endian: header 00 01 00 00, then 6 float64 (52 bytes in all), serialised by
+    rosbags' typestore (the maintained CDR library swarmcover/ros2.py also uses)."""
     vals = (tw.lx, tw.ly, tw.lz, tw.ax, tw.ay, tw.az)
     if not all(math.isfinite(v) for v in vals):
         raise ValueError(f"Twist: non-finite value in {vals}")
-    return CDR_LE + struct.pack("<6d", *vals)
+    from swarmcover.ros2 import serialize, typestore
+    T = typestore().types
+    V3 = T["geometry_msgs/msg/Vector3"]
+    msg = T["geometry_msgs/msg/Twist"](linear=V3(x=float(tw.lx), y=float(tw.ly), z=float(tw.lz)),
+                                       angular=V3(x=float(tw.ax), y=float(tw.ay), z=float(tw.az)))
+    return serialize(msg, "geometry_msgs/msg/Twist")
+
+
+# rosbags builds its type store and generates the Twist serialiser on first use (0.75 s
+# measured): do it at import, so the first command a robot gets is not late by that
+encode_twist(Twist())
 
 
 def _endian(data: bytes, what: str) -> str:

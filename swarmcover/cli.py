@@ -23,6 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "replay": ("swarmcover.replay", "republish an MCAP recording with its original timing"),
     "plot": ("viz.plot", "thesis-style figures and animation from a run folder or MCAP"),
     "view": ("viz.view", "live view of the swarm in the browser"),
+    "config": ("swarmcover.configref", "run config reference: defaults (commented TOML), docs, check"),
     "secure": ("swarmcover.secure", "generate certificates, passwords and ACLs for a lab network"),
     "demo": ("swarmcover.demo", "publish a heartbeat (smoke test of a router)"),
 }

@@ -5,14 +5,25 @@ from the first message divided by ``--rate`` (2 = twice as fast; 0 = as fast as 
 Recorded liveliness tokens are declared and undeclared at their times; recorded query
 replies (``world/info``) are served by a queryable from the start, so late joiners get the
 map as in a live run. Every tool (topics, view, plot) therefore works on a replay as on a
-live run. ``--to-swarm NAME`` rewrites ``sc/<recorded>/`` keys to ``sc/NAME/``.
+live run.
 
-Module API: :func:`read_messages` iterates a recording without Zenoh (plots, analyses).
+Swarm: the replay prints the recorded swarm name (the one ``topics``/``view`` need, with
+``--swarm``). It republishes under the recorded name unless ``--swarm NAME`` (or
+``--to-swarm NAME``, the same) is given: then ``sc/<recorded>/`` keys become ``sc/NAME/``.
+
+What is republished is the msgpack payload each message had on the wire: JSON channels
+(this format) are packed back to the very same bytes, old msgpack recordings are sent as
+stored. The ``/swarmcover/scene`` channel is for viewers of the file; it is not published.
+
+Module API: :func:`read_messages` iterates a recording without Zenoh (plots, analyses);
+:class:`JsonDecoderFactory` lets ``mcap``'s own reader decode the JSON channels.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import logging
+import os
 import sys
 import time
 from dataclasses import dataclass
@@ -22,8 +33,11 @@ from typing import Iterator
 from mcap.reader import make_reader
 
 from bus.keys import ROOT, check_swarm
-from swarmcover.record import (KIND_LIVELINESS, KIND_PUT, KIND_QUERY_REPLY,
-                               LIVELINESS_ENCODING)
+from mcap.decoder import DecoderFactory
+
+from swarmcover.record import (KIND_LIVELINESS, KIND_PUT, KIND_QUERY_REPLY, KIND_SCENE,
+                               LEGACY_MSG_ENCODING, LIVELINESS_ENCODING, MSG_ENCODING,
+                               json_to_payload)
 
 log = logging.getLogger("swarmcover.replay")
 
@@ -39,10 +53,35 @@ class Recorded:
     schema: str   # message tag of the channel's schema, "" if none
 
 
+class JsonDecoderFactory(DecoderFactory):
+    """``mcap.reader.make_reader(f, decoder_factories=[JsonDecoderFactory()])``: decodes
+    ``json`` channels to dicts (what Foxglove's JSON decoding does)."""
+
+    def decoder_for(self, message_encoding, schema):
+        if message_encoding == MSG_ENCODING:
+            return json.loads
+        return None
+
+
 def _kind(channel) -> str:
     if channel.message_encoding == LIVELINESS_ENCODING:
         return KIND_LIVELINESS
+    if channel.metadata.get("swarmcover") == KIND_SCENE:
+        return KIND_SCENE
     return channel.metadata.get("zenoh", KIND_PUT)
+
+
+def _payload(channel, kind: str, data: bytes) -> bytes:
+    """The bytes as they travelled on Zenoh (liveliness: b"put" / b"delete")."""
+    enc = channel.message_encoding
+    if enc == MSG_ENCODING and kind != KIND_SCENE:
+        if kind == KIND_LIVELINESS:
+            return json.loads(data)["token"].encode()
+        return json_to_payload(data)
+    if enc in (LEGACY_MSG_ENCODING, LIVELINESS_ENCODING) or kind == KIND_SCENE:
+        return bytes(data)
+    raise ValueError(f"channel {channel.topic}: message encoding {enc!r} is not one this "
+                     f"version reads (json, or msgpack of older recordings)")
 
 
 def open_recording(path: str | Path):
@@ -71,15 +110,54 @@ def summary_counts(path: str | Path) -> tuple[int, dict[str, str]]:
 
 def read_messages(path: str | Path, *, kinds: tuple[str, ...] | None = None,
                   topics: list[str] | None = None) -> Iterator[Recorded]:
-    """Yield the recording's messages in log-time order (optionally only some kinds/keys)."""
+    """Yield the recording's messages in log-time order (optionally only some kinds/keys).
+
+    ``data`` is the payload as it travelled (msgpack), whatever the file's format; scene
+    messages (kind "scene") carry their protobuf bytes.
+    """
     f, reader = open_recording(path)
     with f:
         for schema, channel, msg in reader.iter_messages(topics=topics, log_time_order=True):
             kind = _kind(channel)
             if kinds is not None and kind not in kinds:
                 continue
-            yield Recorded(channel.topic, bytes(msg.data), int(msg.log_time), kind,
+            try:
+                data = _payload(channel, kind, msg.data)
+            except (ValueError, KeyError, TypeError) as e:
+                raise ValueError(f"recording {path}: channel {channel.topic}: cannot read "
+                                 f"message at log time {msg.log_time}: {e}") from None
+            yield Recorded(channel.topic, data, int(msg.log_time), kind,
                            schema.name if schema is not None else "")
+
+
+def recording_metadata(path: str | Path) -> dict[str, str]:
+    """The ``swarmcover`` metadata record of a recording (swarm, keyexpr, ...), {} if none."""
+    f, reader = open_recording(path)
+    with f:
+        out: dict[str, str] = {}
+        try:
+            for rec in reader.iter_metadata():
+                if rec.name == "swarmcover":
+                    out.update(rec.metadata)
+        except Exception:
+            pass
+        return out
+
+
+def recorded_swarm(path: str | Path) -> str | None:
+    """The swarm a recording was made on: its metadata, else the keys' ``sc/<swarm>/``."""
+    sw = recording_metadata(path).get("swarm")
+    if sw:
+        return sw
+    f, reader = open_recording(path)
+    with f:
+        s = reader.get_summary()
+        names = set()
+        for c in (s.channels.values() if s is not None else ()):
+            parts = c.topic.split("/")
+            if len(parts) > 2 and parts[0] == ROOT:
+                names.add(parts[1])
+        return names.pop() if len(names) == 1 else None
 
 
 def remap_key(key: str, to_swarm: str | None) -> str:
@@ -97,7 +175,7 @@ class Replayer:
 
     rate: speed factor (0 = no waiting); to_swarm: key remap; progress: a Progress or None.
     Query replies are served from the first moment; queries are answered from the main
-    loop (a channel handler), never inside a Zenoh callback.
+    loop (a channel handler), never inside a Zenoh callback. Scene messages are skipped.
     """
 
     def __init__(self, session, path: str | Path, *, rate: float = 1.0,
@@ -177,7 +255,7 @@ class Replayer:
         t0_wall = None
         t0_log = 0
         for r in read_messages(self.path):
-            if r.kind == KIND_QUERY_REPLY:
+            if r.kind in (KIND_QUERY_REPLY, KIND_SCENE):
                 if self.progress is not None:
                     self.progress.update(1)
                 continue
@@ -231,7 +309,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rate", type=float, default=1.0,
                    help="speed factor: 2 = twice as fast, 0 = as fast as possible (default 1)")
     p.add_argument("--to-swarm", default=None, metavar="NAME",
-                   help="republish sc/<recorded swarm>/... keys under sc/NAME/...")
+                   help="republish sc/<recorded swarm>/... keys under sc/NAME/... (the same "
+                        "as --swarm NAME; default: the recorded swarm, printed at start)")
     p.add_argument("--start-delay", type=float, default=0.0, metavar="S",
                    help="serve world/info but wait S seconds before the first message")
     p.add_argument("--hold", type=float, default=0.0, metavar="S",
@@ -239,19 +318,40 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
     p.add_argument("--log-level", default="INFO")
     add_zenoh_args(p)
+    argv = list(sys.argv[1:] if argv is None else argv)
     args = p.parse_args(argv)
     setup_logging(args.log_level, "swarmcover.replay")
-    if args.to_swarm is not None:
+    swarm_given = (any(a == "--swarm" or a.startswith("--swarm=") for a in argv)
+                   or bool(os.environ.get("SWARMCOVER_SWARM")))
+    target = args.to_swarm
+    if swarm_given:
+        if target is not None and target != args.swarm:
+            log.error("--swarm %s and --to-swarm %s disagree: give one (they mean the same: "
+                      "republish under that swarm)", args.swarm, target)
+            return 2
+        target = args.swarm
+    if target is not None:
         try:
-            check_swarm(args.to_swarm)
+            check_swarm(target)
         except ValueError as e:
-            log.error("--to-swarm: %s", e)
+            log.error("--swarm: %s", e)
             return 2
     try:
         total, _ = summary_counts(args.file)
+        recorded = recorded_swarm(args.file)
     except (OSError, ValueError) as e:
         log.error("%s", e)
         return 2
+    to_swarm = target if target is not None and target != recorded else None
+    shown = target or recorded
+    if recorded is None:
+        print("recorded swarm: unknown (keys outside sc/<swarm>/)", file=sys.stderr)
+    elif to_swarm:
+        print(f"recorded swarm: {recorded}; republished as swarm {to_swarm} "
+              f"(swarmcover topics list --swarm {to_swarm})", file=sys.stderr, flush=True)
+    else:
+        print(f"recorded swarm: {recorded} (swarmcover topics list --swarm {recorded})",
+              file=sys.stderr, flush=True)
     try:
         session = open_session(args)
     except (ValueError, ConnectionError) as e:
@@ -263,13 +363,14 @@ def main(argv: list[str] | None = None) -> int:
             prog = Progress(total=total or None, label="replay", unit="msg",
                             enabled=not args.quiet)
             try:
-                rep = Replayer(session, args.file, rate=args.rate, to_swarm=args.to_swarm,
+                rep = Replayer(session, args.file, rate=args.rate, to_swarm=to_swarm,
                                progress=prog)
             except ValueError as e:
                 log.error("%s", e)
                 return 2
             rep.declare()
-            print(f"READY replay {args.file} ({total} messages, rate {args.rate:g})", flush=True)
+            print(f"READY replay {args.file} ({total} messages, rate {args.rate:g}, "
+                  f"swarm {shown or '?'})", flush=True)
             n = rep.run(stop, start_delay_s=args.start_delay)
             prog.close(note="interrupted" if stop.is_set() else "done")
             if args.hold > 0 and not stop.is_set():

@@ -26,7 +26,7 @@ def _defs():
     for pkg in PACKAGES:
         for path in sorted((ROOT / pkg).rglob("*.py")):
             tree = ast.parse(path.read_text(), str(path))
-            for node in ast.walk(tree):
+            for node in tree.body:  # module level: a method or a closure named so is another concept
                 if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                     yield path.relative_to(ROOT).as_posix(), node.name, node.lineno
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import signal
+import subprocess
 import sys
 import threading
 import time
@@ -17,8 +18,10 @@ from bus import messages as m
 from bus.keys import Keys
 from bus.session import Mailbox
 from procs import client_session
-from swarmcover.record import McapSink, Recorder, resolve_keyexpr, schema_for
-from swarmcover.replay import read_messages, remap_key, summary_counts
+from swarmcover.record import (McapSink, Recorder, json_to_payload, payload_to_json,
+                               resolve_keyexpr, schema_for)
+from swarmcover.replay import (JsonDecoderFactory, read_messages, recorded_swarm, remap_key,
+                               summary_counts)
 from viz.synth import Scenario
 
 SYNTH = [sys.executable, "-m", "viz.synth"]
@@ -75,7 +78,7 @@ def test_sink_writes_schemas_channels_and_exact_bytes(tmp_path):
         [(a, b, c, d) for a, b, c, d in sent], key=lambda x: x[2])
     schemas = {r.key: r.schema for r in got}
     assert schemas[k.truth] == "Truth" and schemas[k.complex] == "Complex"
-    assert schemas[k.world_info] == "WorldInfo" and schemas["sc/s1/unknown/thing"] == ""
+    assert schemas[k.world_info] == "WorldInfo" and schemas["sc/s1/unknown/thing"] == "swarmcover.Raw"
     n, chans = summary_counts(path)
     assert n == len(sent)
     assert chans[k.alive("robot", 3)] == "liveliness"
@@ -85,9 +88,69 @@ def test_sink_writes_schemas_channels_and_exact_bytes(tmp_path):
         for sch in summ.schemas.values():
             assert sch.encoding == "jsonschema"
             assert json.loads(sch.data)["title"] == sch.name
-        assert {c.message_encoding for c in summ.channels.values()} == {"msgpack", "liveliness"}
+        assert {c.message_encoding for c in summ.channels.values()} == {"json"}
         meta = list(r.iter_metadata())
         assert meta and meta[0].metadata["swarm"] == "s1"
+    # mcap's own reader decodes every channel with a JSON decoder, to the messages' fields
+    with open(path, "rb") as f:
+        dec = {ch.topic: d for _, ch, _, d in
+               make_reader(f, decoder_factories=[JsonDecoderFactory()]).iter_decoded_messages()}
+    assert dec[k.truth] == json.loads(json.dumps(truth.to_dict()))
+    assert dec[k.alive("robot", 3)] == {"token": "delete"}
+    assert set(dec["sc/s1/unknown/thing"]) == {"_msgpack_b64"}  # not a map: kept as bytes
+
+
+def test_json_conversion_is_byte_exact_and_lossless_for_odd_payloads():
+    import msgpack
+    sc = Scenario()
+    for msg in (sc.info, sc.truth(9, 0.3, 4, 0.2), sc.complex(9, 0.2),
+                m.Status(robot=3, pose=[1e-300, -0.0, 3.141592653589793], reason="é✓")):
+        data, tag = payload_to_json(msg.encode())
+        assert tag == msg.TAG and json_to_payload(data) == msg.encode()
+        assert m.decode(json_to_payload(data)) == msg
+    odd = [b"", b"\xc1", msgpack.packb({"x": float("nan")}), msgpack.packb({1: 2}),
+           msgpack.packb({"b": b"\x00\x01"}, use_bin_type=True),
+           b"\x81\xa1x\xca\x3f\x80\x00\x00",  # float32 1.0: JSON would repack as float64
+           msgpack.packb({"_msgpack_b64": "aGk="})]  # a map that looks like the raw form
+    for p in odd:
+        data, tag = payload_to_json(p)
+        json.loads(data)  # strict JSON
+        assert json_to_payload(data) == p
+
+
+def test_old_msgpack_recordings_still_read_and_convert(tmp_path):
+    from mcap.writer import Writer
+    k = Keys("old")
+    sc = Scenario()
+    old = tmp_path / "old.mcap"
+    truth, cx = sc.truth(4, 0.5, 3, 0.2).encode(), sc.complex(4, 0.2).encode()
+    with open(old, "wb") as f:  # the format recordings had before JSON channels
+        w = Writer(f)
+        w.start(profile="swarmcover", library="old")
+        w.add_metadata("swarmcover", {"swarm": "old"})
+        sid = w.register_schema("Truth", "jsonschema", b"{}")
+        ct = w.register_channel(k.truth, "msgpack", sid, {"zenoh": "put"})
+        cc = w.register_channel(k.complex, "msgpack", 0, {"zenoh": "put"})
+        cl = w.register_channel(k.alive("robot", 1), "liveliness", 0, {"zenoh": "liveliness"})
+        cw = w.register_channel(k.world_info, "msgpack", 0, {"zenoh": "query_reply"})
+        w.add_message(cw, log_time=1, data=sc.info.encode(), publish_time=1)
+        w.add_message(cl, log_time=2, data=b"put", publish_time=2)
+        w.add_message(ct, log_time=3, data=truth, publish_time=3)
+        w.add_message(cc, log_time=4, data=cx, publish_time=4)
+        w.finish()
+    got = [(r.key, r.data, r.kind) for r in read_messages(old)]
+    assert got == [(k.world_info, sc.info.encode(), "query_reply"),
+                   (k.alive("robot", 1), b"put", "liveliness"), (k.truth, truth, "put"),
+                   (k.complex, cx, "put")]
+    assert recorded_swarm(old) == "old"
+    new = tmp_path / "new.mcap"
+    out = subprocess.run([sys.executable, "-m", "swarmcover", "record", "--from", str(old),
+                          "-o", str(new), "-q"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert [(r.key, r.data, r.kind) for r in read_messages(new) if r.kind != "scene"] == got
+    with open(new, "rb") as f:
+        chans = make_reader(f).get_summary().channels.values()
+    assert {c.message_encoding for c in chans} == {"json", "protobuf"}
 
 
 def test_missing_directory_and_bad_file_are_named(tmp_path):
@@ -155,6 +218,66 @@ def test_recorder_excludes_counts_and_fetches_world_info_when_world_appears(rout
 
 # --------------------------------------------------------------------------- end to end
 
+def check_tools_decode_every_channel(path, last_truth: m.Truth) -> None:
+    """What Foxglove/Lichtblick do: the ``mcap`` reader decodes every message of every
+    channel (JSON, and the protobuf scene), and the last scene shows the robots of the
+    last Truth, each with its id."""
+    from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[JsonDecoderFactory(),
+                                                   ProtobufDecoderFactory()])
+        encodings = {c.message_encoding for c in reader.get_summary().channels.values()}
+        n, scenes, topics = 0, [], set()
+        for _, channel, _, decoded in reader.iter_decoded_messages():
+            n += 1
+            topics.add(channel.topic)
+            if channel.topic == "/swarmcover/scene":
+                scenes.append(decoded)
+            else:
+                assert isinstance(decoded, dict), channel.topic
+    assert encodings == {"json", "protobuf"} and n > 100
+    assert len(scenes) >= 3
+    last = {e.id: e for e in scenes[-1].entities}
+    assert set(last) >= {"walls", "sources", "robots", "robot_ids", "edges", "frontier",
+                         "obstacle", "redundant", "coverage"}
+    meta = {kv.key: kv.value for kv in last["robots"].metadata}
+    ids = [int(i) for i in meta["ids"].split(",") if i]
+    assert ids == list(last_truth.ids) and len(last["robots"].spheres) == len(ids)
+    assert sorted(int(t.text) for t in last["robot_ids"].texts) == sorted(ids)
+    for sp, x, y in zip(last["robots"].spheres, last_truth.x, last_truth.y):
+        assert (sp.pose.position.x, sp.pose.position.y) == pytest.approx((x, y))
+    assert len(last["walls"].lines[0].points) >= 8  # a closed boundary as a line list
+
+
+def test_replay_honours_swarm_and_prints_the_recorded_one(router, procs, tmp_path):
+    src, dst = Keys("recorded" + uuid.uuid4().hex[:6]), Keys("other" + uuid.uuid4().hex[:6])
+    path = tmp_path / "s.mcap"
+    with McapSink(path, metadata={"swarm": src.swarm}) as sink:
+        for i in range(5):
+            sink.write(src.demo, m.Demo(seq=i, text="r").encode(), 1000 + i)
+    s = client_session(router, dst.swarm)
+    mb = Mailbox()
+    sub = s.declare_subscriber("sc/*/demo", mb.callback)
+    try:
+        time.sleep(0.5)
+        rep = procs.swarmcover("replay", path, "--rate", "0", "--start-delay", "0.5", "-q",
+                               "--connect", router, "--swarm", dst.swarm)
+        assert rep.wait(30) == 0, rep.output()
+        assert f"recorded swarm: {src.swarm}; republished as swarm {dst.swarm}" in rep.output()
+        deadline = time.monotonic() + 10
+        got = []
+        while len(got) < 5 and time.monotonic() < deadline:
+            item = mb.get(0.1)
+            if item is not None:
+                got.append(item)
+    finally:
+        sub.undeclare()
+        s.close()
+    assert [k for k, _, _ in got] == [dst.demo] * 5
+    assert [m.decode(d).seq for _, d, _ in got] == list(range(5))
+    bad = procs.swarmcover("replay", path, "--connect", router, "--swarm", "a", "--to-swarm", "b")
+    assert bad.wait(20) == 2 and "disagree" in bad.output()
+
 def test_recorded_run_replays_into_topics_echo_with_identical_payloads(router, zargs, procs,
                                                                        tmp_path):
     out = tmp_path / "run.mcap"
@@ -182,6 +305,7 @@ def test_recorded_run_replays_into_topics_echo_with_identical_payloads(router, z
     assert len(info) == 1 and info[0].key == k.world_info
     tokens = {(r.key, r.data) for r in recorded if r.kind == "liveliness"}
     assert (k.alive("robot", 2), b"put") in tokens and (k.alive("robot", 2), b"delete") in tokens
+    check_tools_decode_every_channel(out, m.decode(puts[k.truth][-1]))
 
     # replay into `topics echo --raw`, a liveliness monitor and a world/info query
     echo = procs.swarmcover("topics", "echo", "**", "--raw", *zargs)
@@ -207,6 +331,7 @@ def test_recorded_run_replays_into_topics_echo_with_identical_payloads(router, z
         elapsed = time.monotonic() - t0
         rep.signal(signal.SIGINT)
         assert rep.wait(20) == 0, rep.output()
+        assert f"recorded swarm: {swarm} (swarmcover topics list --swarm {swarm})" in rep.output()
     finally:
         lsub.undeclare()
         mon.close()
@@ -250,3 +375,22 @@ print('EXIT', rec.messages, flush=True)
                        text=True, timeout=60)
     assert "EXIT 5" in r.stdout, r.stdout + r.stderr
     assert [r.data for r in read_messages(out)] == [m.Demo(seq=i).encode() for i in range(5)]
+
+
+@pytest.mark.timeout(300)
+def test_recorded_tiny_run_opens_in_the_tools_with_the_final_robots_in_the_scene(procs,
+                                                                                  tmp_path):
+    """`run --record` on the tiny map: the mcap package decodes every channel of run.mcap,
+    and the scene's last update shows the robots of the last Truth (the ones alive at the
+    end), ids included."""
+    from procs import free_port
+    out = tmp_path / "run"
+    p = procs.swarmcover("run", "configs/tiny.toml", "--out", str(out), "--quiet", "--record",
+                         "--port", str(free_port()))
+    assert p.wait(280) == 0, p.output()[-3000:]
+    summary = json.loads((out / "summary.json").read_text())
+    truths = [r for r in read_messages(out / "run.mcap", topics=None)
+              if r.kind == "put" and r.key.endswith("/world/truth")]
+    last = m.decode(truths[-1].data)
+    assert summary["certified"] and len(last.ids) >= summary["ideal_count"] == 7
+    check_tools_decode_every_channel(out / "run.mcap", last)

@@ -173,3 +173,97 @@ def test_groundtruth_coverage_is_used_when_world_provides_it():
     gt = fn(sc.info, truth)
     disks = disk_coverage(sc.info, truth.x, truth.y)
     assert gt is not None and 0 < gt <= disks + 0.02  # line of sight only removes coverage
+
+
+# --------------------------------------------------------------------------- readability
+
+def _info(boundary, name="t"):
+    return m.WorldInfo(name=name, rv=1.0, robot_radius=0.06, dt=0.05, boundary=boundary,
+                       obstacles=[], sources=[0.3, 0.3, 0.0], free_area=1.0, config="")
+
+
+def _drawn(fig):
+    fig.canvas.draw()
+    return fig, fig.canvas.get_renderer()
+
+
+@pytest.mark.parametrize("x0,y0,w,h", [(0, 0, 30.0, 2.0), (0, 0, 2.0, 14.0), (0, 0, 6.0, 4.0),
+                                       (-20, -12.5, 40.0, 5.0), (100, 100, 30.0, 3.0)])
+def test_no_label_title_or_legend_is_clipped_whatever_the_map_aspect(x0, y0, w, h):
+    """Wide maps with wide tick labels (-12.5, 102.5: ROS maps have such origins) clipped
+    the y label at 0.07 of the figure width; margins are now in inches."""
+    from viz.figures import snapshot_figure
+    truth = m.Truth(tick=1, t=0.0, ids=[0, 1], x=[0.5, 1.2], y=[0.5, 0.6], theta=[0.0, 0.0],
+                    live=[False, True])
+    truth.x[:], truth.y[:] = [x0 + 0.5, x0 + 1.2], [y0 + 0.5, y0 + 0.6]
+    fig, r = _drawn(snapshot_figure(_info([x0, y0, x0 + w, y0, x0 + w, y0 + h, x0, y0 + h]),
+                                    truth, None,
+                                    title="a long title naming the map, cycle and robots"))
+    W, H = fig.canvas.get_width_height()
+    ax = fig.axes[0]
+    boxes = [ax.yaxis.label.get_window_extent(r), ax.xaxis.label.get_window_extent(r),
+             ax.title.get_window_extent(r), fig.legends[0].get_window_extent(r)]
+    y0, y1 = ax.get_ylim()
+    boxes += [t.get_window_extent(r) for t in ax.get_yticklabels()
+              if t.get_text() and y0 <= t.get_position()[1] <= y1]  # ticks drawn
+    for b in boxes:
+        assert b.x0 >= 0 and b.y0 >= 0 and b.x1 <= W and b.y1 <= H, (w, h, b, W, H)
+    # the legend does not run into the x axis label
+    assert fig.legends[0].get_window_extent(r).y1 <= ax.xaxis.label.get_window_extent(r).y0 + 1
+
+
+def test_overlapping_triangles_shade_like_one_triangle():
+    from viz.figures import TRI_FILL, snapshot_figure
+    # triangles ABC and ABE overlap inside ABE (E is inside ABC)
+    truth = m.Truth(tick=1, t=0.0, ids=[0, 1, 2, 3], x=[0.0, 4.0, 2.0, 2.0],
+                    y=[0.0, 0.0, 3.2, 1.6], theta=[0.0] * 4, live=[False] * 4)
+    cx = m.Complex(cycle=1, vertices=[0, 1, 2, 3], occupants=[0, 1, 2, 3],
+                   edges=[0, 1, 0, 2, 1, 2, 0, 3, 1, 3, 2, 3], triangles=[0, 1, 2, 0, 1, 3])
+    fig, _ = _drawn(snapshot_figure(_info([-1, -1, 5, -1, 5, 4, -1, 4]), truth, cx))
+    img = np.asarray(fig.canvas.buffer_rgba())[..., :3].astype(int)
+    H = img.shape[0]
+    ax = fig.axes[0]
+
+    def px(x, y):
+        X, Y = ax.transData.transform((x, y))
+        return img[int(round(H - Y)), int(round(X))]
+    twice, once = px(1.4, 0.5), px(1.2, 1.5)
+    want = np.array([int(TRI_FILL[k:k + 2], 16) for k in (1, 3, 5)])
+    assert np.abs(twice - once).max() <= 2 and np.abs(once - want).max() <= 2, (twice, once)
+
+
+def test_removed_redundant_robots_and_inferred_edges_have_their_own_marks():
+    from types import SimpleNamespace
+
+    from viz.figures import COLORS, snapshot_figure
+    truth = m.Truth(tick=1, t=0.0, ids=[0, 1, 2, 7], x=[0.0, 2.0, 1.0, 3.5],
+                    y=[0.0, 0.0, 1.6, 3.0], theta=[0.0] * 4, live=[False] * 4)
+    base = m.Complex(cycle=4, vertices=[0, 1, 2], occupants=[0, 1, 2],
+                     edges=[0, 1, 0, 2, 1, 2], triangles=[0, 1, 2], obstacle=[0, 1])
+    # Complex.inferred is optional on the wire: a Complex without it draws as before
+    assert len(build_scene(truth, base).inferred) == 0
+    cx = SimpleNamespace(**{f: getattr(base, f) for f, _ in base._FIELDS}, inferred=[1])
+    scene = build_scene(truth, cx, removed={7})
+    assert scene.removed.tolist() == [False, False, False, True]
+    assert scene.inferred.shape == (1, 2, 2)
+    fig, _ = _drawn(snapshot_figure(_info([-1, -1, 5, -1, 5, 4, -1, 4]), truth, cx,
+                                    removed={7}))
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "removed (redundant)" in labels and "inferred obstacle O" in labels
+    img = np.asarray(fig.canvas.buffer_rgba())[..., :3].astype(int)
+    X, Y = fig.axes[0].transData.transform((3.5, 3.0))
+    grey = np.array([int(COLORS["removed"][k:k + 2], 16) for k in (1, 3, 5)])
+    assert np.abs(img[int(round(img.shape[0] - Y)), int(round(X))] - grey).max() <= 3
+
+
+def test_gif_frame_legend_text_is_readable_at_its_pixel_size():
+    from viz.figures import GIF_DPI, GIF_LEGEND_PT, GIF_WIDTH_IN, snapshot_figure
+    sc = Scenario()
+    fig = snapshot_figure(sc.info, sc.truth(6, 0.5, 6, 6.0), sc.complex(6, 6.0),
+                          width_in=GIF_WIDTH_IN, legend_fontsize=GIF_LEGEND_PT)
+    fig.set_dpi(GIF_DPI)
+    fig, r = _drawn(fig)
+    heights = [t.get_window_extent(r).height for t in fig.legends[0].get_texts()]
+    assert min(heights) >= 12, heights  # was ~8.5 px (7.5 pt at 70 dpi)
+    img = snapshot_image(sc.info, sc.truth(6, 0.5, 6, 6.0), sc.complex(6, 6.0))
+    assert 450 <= img.size[0] <= 550  # the GIF stays about as wide as before (490 px)

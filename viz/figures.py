@@ -4,8 +4,13 @@ matplotlib with the Agg canvas (no pyplot state, safe in any thread). Colours:
 walls black, obstacles grey, sources blue triangles; virtual robots red, twins of live
 robots green, measured (mocap) poses of live robots green hollow squares joined to their
 twins by dashed lines; robots not (yet) in the complex hollow; redundant robots crossed;
-complex edges grey over light triangles; frontier edges (K) orange, obstacle edges (O)
-purple; optional rv disks light blue. World frame, metres, x right, y up.
+robots removed as redundant grey diamonds; complex edges grey over the area the triangles
+cover, in one flat colour (overlaps do not shade darker); frontier edges (K) orange,
+obstacle edges (O) purple, those the coordinator inferred (Complex.inferred, when sent)
+dotted; optional rv disks, flat light blue. World frame, metres, x right, y up.
+
+Layout in inches (fixed margins for tick labels, axis labels, title and legend rows), so no
+label is clipped whatever the map's aspect, and animation frames share one size.
 """
 from __future__ import annotations
 
@@ -28,17 +33,30 @@ COLORS = {
     "wall": "#111111", "obstacle": "#9a9a9a", "source": "#1f4fbf",
     "virtual": "#d62728", "twin": "#2ca02c", "mocap": "#2ca02c",
     "edge": "#8c8c8c", "triangle": "#1f77b4", "frontier": "#ff7f0e", "obstacle_edge": "#9467bd",
-    "redundant": "#000000", "disk": "#1f77b4",
+    "redundant": "#000000", "disk": "#1f77b4", "removed": "#7f7f7f",
 }
+# flat fills: the colour a 10 % (triangles) or 6 % (disks) tint of blue gives on white, drawn
+# opaque, so overlapping triangles or disks read as one area, not as "more covered"
+TRI_FILL = "#e8f1f7"
+DISK_FILL = "#f1f6fa"
+LEGEND_COLS = 4
+LEGEND_ROWS = 3   # room for every legend item (12 at most), so all frames share one size
 
 
-def _figure(info, width_in: float = 7.0) -> tuple[Figure, object]:
+def _figure(info, width_in: float = 7.0, legend_rows: int = 2,
+            legend_fontsize: float = 7.5) -> tuple[Figure, object]:
+    """Figure and map axes. Margins are in inches: left for the y tick labels and label,
+    bottom for the x label and the legend rows, top for the title."""
     x0, x1, y0, y1 = map_bounds(info, margin=0.05 * max(info.rv, 0.1))
     aspect = (y1 - y0) / max(x1 - x0, 1e-9)
-    h = float(np.clip(width_in * aspect, 2.5, 2.0 * width_in)) + 1.2
+    left, right, top = 0.85, 0.2, 0.45
+    bottom = 0.55 + legend_rows * legend_fontsize * 1.75 / 72 + 0.1
+    aw = width_in - left - right
+    ah = float(np.clip(aw * aspect, 1.2, 2.0 * width_in))
+    h = ah + top + bottom
     fig = Figure(figsize=(width_in, h), dpi=100)
     FigureCanvasAgg(fig)
-    ax = fig.add_axes((0.07, 0.17, 0.9, 0.74))
+    ax = fig.add_axes((left / width_in, bottom / h, aw / width_in, ah / h))
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
     ax.set_aspect("equal", adjustable="box")
@@ -68,17 +86,20 @@ def draw_scene(ax, info, scene: Scene, *, show_disks: bool = False) -> None:
     """Complex, fence and robots of a Scene (on top of :func:`draw_map`)."""
     if show_disks and scene.n_robots:
         for x, y in scene.xy:
-            ax.add_patch(Circle((x, y), info.rv, facecolor=COLORS["disk"], alpha=0.06,
-                                edgecolor="none", zorder=1))
-    if len(scene.triangles):
-        ax.add_collection(PolyCollection(scene.triangles, facecolors=COLORS["triangle"],
-                                         alpha=0.10, edgecolors="none", zorder=1.5))
+            ax.add_patch(Circle((x, y), info.rv, facecolor=DISK_FILL, edgecolor="none",
+                                zorder=1))
+    if len(scene.triangles):  # opaque, no edge: the union reads as one flat area
+        ax.add_collection(PolyCollection(scene.triangles, facecolors=TRI_FILL,
+                                         edgecolors=TRI_FILL, linewidths=0.3, zorder=1.5))
     if len(scene.edges):
         ax.add_collection(LineCollection(scene.edges, colors=COLORS["edge"], linewidths=0.6,
                                          zorder=2))
     if len(scene.obstacle):
         ax.add_collection(LineCollection(scene.obstacle, colors=COLORS["obstacle_edge"],
                                          linewidths=2.0, zorder=2.5))
+    if len(scene.inferred):  # obstacle edges the coordinator inferred: white dots on O
+        ax.add_collection(LineCollection(scene.inferred, colors="white", linewidths=1.0,
+                                         linestyles=(0, (1.0, 1.6)), zorder=2.55))
     if len(scene.frontier):
         ax.add_collection(LineCollection(scene.frontier, colors=COLORS["frontier"],
                                          linewidths=2.0, zorder=2.6))
@@ -88,7 +109,13 @@ def draw_scene(ax, info, scene: Scene, *, show_disks: bool = False) -> None:
         if inc.any():
             ax.scatter(scene.xy[inc, 0], scene.xy[inc, 1], s=22, c=col[inc], zorder=5,
                        edgecolors="black", linewidths=0.3)
-        out = ~inc
+        removed = scene.removed if len(scene.removed) == scene.n_robots else np.zeros(
+            scene.n_robots, bool)
+        removed = removed & ~inc
+        if removed.any():
+            ax.scatter(scene.xy[removed, 0], scene.xy[removed, 1], s=30, marker="D",
+                       c=COLORS["removed"], edgecolors="black", linewidths=0.3, zorder=5)
+        out = ~inc & ~removed
         if out.any():
             ax.scatter(scene.xy[out, 0], scene.xy[out, 1], s=22, facecolors="none",
                        edgecolors=col[out], linewidths=1.1, zorder=5)
@@ -106,7 +133,7 @@ def draw_scene(ax, info, scene: Scene, *, show_disks: bool = False) -> None:
                        edgecolors=COLORS["mocap"], linewidths=1.2, zorder=5)
 
 
-def _legend(fig, scene: Scene, show_disks: bool) -> None:
+def _legend_items(scene: Scene) -> list:
     items = [Line2D([], [], color=COLORS["wall"], lw=1.6, label="walls"),
              Line2D([], [], marker="^", ls="", color=COLORS["source"], label="source"),
              Line2D([], [], marker="o", ls="", color=COLORS["virtual"], mec="black", mew=0.3,
@@ -124,8 +151,18 @@ def _legend(fig, scene: Scene, show_disks: bool) -> None:
                             label="not in complex"))
     if scene.redundant.any():
         items.append(Line2D([], [], marker="x", ls="", color=COLORS["redundant"], label="redundant"))
-    fig.legend(handles=items, loc="lower center", ncol=min(4, len(items)), fontsize=7.5,
-               frameon=False, bbox_to_anchor=(0.5, 0.0))
+    if len(scene.removed) and (scene.removed & ~scene.in_complex).any():
+        items.append(Line2D([], [], marker="D", ls="", color=COLORS["removed"], mec="black",
+                            mew=0.3, label="removed (redundant)"))
+    if len(scene.inferred):
+        items.append(Line2D([], [], color=COLORS["obstacle_edge"], lw=2, ls=(0, (1, 1)),
+                            label="inferred obstacle O"))
+    return items
+
+
+def _legend(fig, items: list, fontsize: float = 7.5) -> None:
+    fig.legend(handles=items, loc="lower center", ncol=min(LEGEND_COLS, len(items)),
+               fontsize=fontsize, frameon=False, bbox_to_anchor=(0.5, 0.02))
 
 
 def default_title(info, scene: Scene, cx=None) -> str:
@@ -143,38 +180,49 @@ def default_title(info, scene: Scene, cx=None) -> str:
 
 
 def snapshot_figure(info, truth=None, cx=None, *, title: str = "", show_disks: bool = False,
-                    mocap: dict | None = None, width_in: float = 7.0) -> Figure:
-    """The snapshot as a matplotlib Figure (Agg canvas attached)."""
-    scene = build_scene(truth, cx, mocap)
-    fig, ax = _figure(info, width_in)
+                    mocap: dict | None = None, width_in: float = 7.0, removed=(),
+                    legend_fontsize: float = 7.5) -> Figure:
+    """The snapshot as a matplotlib Figure (Agg canvas attached). removed: robot ids taken
+    out of the complex as redundant (drawn with their own mark while not in the complex)."""
+    scene = build_scene(truth, cx, mocap, removed=removed)
+    items = _legend_items(scene)
+    fig, ax = _figure(info, width_in, LEGEND_ROWS, legend_fontsize)
     draw_map(ax, info)
     draw_scene(ax, info, scene, show_disks=show_disks)
     ax.set_title(title or default_title(info, scene, cx), fontsize=10)
-    _legend(fig, scene, show_disks)
+    _legend(fig, items, legend_fontsize)
     return fig
 
 
 def render_snapshot(info, truth=None, cx=None, path: str | os.PathLike = "snapshot.png", *,
                     title: str = "", show_disks: bool = False, mocap: dict | None = None,
-                    dpi: int = 110) -> Path:
+                    dpi: int = 110, removed=()) -> Path:
     """Draw one instant to a PNG file and return its path.
 
     info: WorldInfo (map); truth: Truth or None (no robots); cx: Complex or None (no
     complex); positions come from ``truth``, matched to vertices through
     ``cx.occupants``; robots not in the complex are drawn hollow. mocap: optional
-    {robot id: (x, y)} measured poses of live robots.
+    {robot id: (x, y)} measured poses of live robots; removed: ids of robots removed as
+    redundant.
     """
-    fig = snapshot_figure(info, truth, cx, title=title, show_disks=show_disks, mocap=mocap)
+    fig = snapshot_figure(info, truth, cx, title=title, show_disks=show_disks, mocap=mocap,
+                          removed=removed)
     path = Path(path)
     fig.savefig(path, dpi=dpi)
     return path
 
 
+GIF_WIDTH_IN, GIF_DPI, GIF_LEGEND_PT = 5.0, 100, 9.0   # 500 px wide, legend text ~12 px
+
+
 def snapshot_image(info, truth=None, cx=None, *, title: str = "", show_disks: bool = False,
-                   mocap: dict | None = None, dpi: int = 80):
-    """The snapshot as a PIL RGB image (animation frames)."""
+                   mocap: dict | None = None, dpi: int = GIF_DPI, width_in: float = GIF_WIDTH_IN,
+                   legend_fontsize: float = GIF_LEGEND_PT, removed=()):
+    """The snapshot as a PIL RGB image (animation frames): a smaller figure at a higher dpi
+    than the PNGs, so the text (legend, ticks) stays readable at the GIF's pixel size."""
     from PIL import Image
-    fig = snapshot_figure(info, truth, cx, title=title, show_disks=show_disks, mocap=mocap)
+    fig = snapshot_figure(info, truth, cx, title=title, show_disks=show_disks, mocap=mocap,
+                          width_in=width_in, removed=removed, legend_fontsize=legend_fontsize)
     fig.set_dpi(dpi)
     canvas = fig.canvas
     canvas.draw()

@@ -19,7 +19,9 @@ class Scene:
     ids/xy/live: robot bodies from Truth (live = twin of a live robot); in_complex: the
     robot occupies a vertex; redundant: its vertex is in Complex.redundant; edges,
     frontier, obstacle: (n, 2, 2) segments; triangles: (m, 3, 2); mocap: {robot: (x, y)}
-    measured poses of live robots, drawn beside their twins.
+    measured poses of live robots, drawn beside their twins. removed: the robot was taken
+    out of the complex as redundant (from the caller's history). inferred: obstacle edges
+    the coordinator inferred (Complex.inferred, optional on the wire).
     """
     ids: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
@@ -30,6 +32,8 @@ class Scene:
     frontier: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
     obstacle: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
     triangles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 2)))
+    removed: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    inferred: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
     mocap: dict = field(default_factory=dict)
     cycle: int | None = None
     t: float | None = None
@@ -56,8 +60,9 @@ def _segments(pairs: list[tuple[int, int]], vpos: dict) -> np.ndarray:
     return np.asarray(segs, float).reshape(-1, 2, 2)
 
 
-def build_scene(truth, cx, mocap: dict | None = None) -> Scene:
-    """The Scene of a Truth and a Complex (either may be None)."""
+def build_scene(truth, cx, mocap: dict | None = None, removed=()) -> Scene:
+    """The Scene of a Truth and a Complex (either may be None). removed: robot ids removed
+    as redundant so far (marked while they hold no vertex)."""
     s = Scene(mocap=dict(mocap or {}))
     if truth is not None:
         s.ids = np.asarray(truth.ids, int)
@@ -67,6 +72,8 @@ def build_scene(truth, cx, mocap: dict | None = None) -> Scene:
         s.t = float(truth.t)
     s.in_complex = np.zeros(len(s.ids), bool)
     s.redundant = np.zeros(len(s.ids), bool)
+    gone = {int(r) for r in removed}
+    s.removed = np.array([int(r) in gone for r in s.ids], bool)
     if cx is None:
         return s
     s.cycle = int(cx.cycle)
@@ -82,6 +89,8 @@ def build_scene(truth, cx, mocap: dict | None = None) -> Scene:
     s.edges = _segments(pairs, vpos)
     s.frontier = _segments([pairs[k] for k in cx.frontier], vpos)
     s.obstacle = _segments([pairs[k] for k in cx.obstacle], vpos)
+    inferred = getattr(cx, "inferred", None) or ()  # optional field: older Complexes lack it
+    s.inferred = _segments([pairs[k] for k in inferred if 0 <= k < len(pairs)], vpos)
     tris = [tuple(int(v) for v in cx.triangles[3 * k:3 * k + 3])
             for k in range(len(cx.triangles) // 3)]
     s.triangles = np.asarray([[vpos[v] for v in t] for t in tris if all(v in vpos for v in t)],

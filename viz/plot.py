@@ -33,6 +33,7 @@ class Frame:
     truth: m.Truth | None
     mocap: dict = field(default_factory=dict)
     t_log: float = 0.0  # seconds since the first recorded message
+    removed: frozenset = frozenset()  # robots marked redundant so far (drawn while outside)
 
     @property
     def cycle(self) -> int | None:
@@ -83,6 +84,7 @@ def load_run(path: str | Path, *, max_truth_frames: int = 400, progress: bool = 
     frames: dict[int, Frame] = {}
     truths: list[tuple[float, m.Truth, dict]] = []
     pending: list[Frame] = []
+    redundant: set[int] = set()
     n_truth, stride, last_truth = 0, 1, None
     invalid = 0
     n = 0
@@ -129,7 +131,9 @@ def load_run(path: str | Path, *, max_truth_frames: int = 400, progress: bool = 
             if msg.source == "mocap":
                 mocap[msg.robot] = (msg.x, msg.y)
         elif isinstance(msg, m.Complex):
-            frames[msg.cycle] = Frame(msg, truth, dict(mocap), t)
+            occ = dict(zip(msg.vertices, msg.occupants))
+            redundant |= {occ[v] for v in msg.redundant if occ.get(v, -1) >= 0}
+            frames[msg.cycle] = Frame(msg, truth, dict(mocap), t, frozenset(redundant))
             if truth is None:
                 pending.append(frames[msg.cycle])
     prog.close()
@@ -243,7 +247,7 @@ def make_plots(path: str | Path, out: str | Path | None = None, *, cycles: list[
         name = (f"snapshot_cycle_{f.cycle:04d}.png" if f.cycle is not None
                 else f"snapshot_t{f.t_log:07.1f}s.png")
         written.append(render_snapshot(info, f.truth, f.cx, outdir / name, title=title(f, i),
-                                       show_disks=show_disks, mocap=f.mocap))
+                                       show_disks=show_disks, mocap=f.mocap, removed=f.removed))
     with Progress(total=len(run.frames), label="plot: coverage", unit=unit, enabled=progress) as p:
         rows = []
         for r in stats_rows(run, cov_fn):
@@ -264,7 +268,8 @@ def make_plots(path: str | Path, out: str | Path | None = None, *, cycles: list[
             for i in idx:
                 f = run.frames[i]
                 frames.append(snapshot_image(info, f.truth, f.cx, title=title(f, i),
-                                             show_disks=show_disks, mocap=f.mocap, dpi=70))
+                                             show_disks=show_disks, mocap=f.mocap,
+                                             removed=f.removed))
                 p.update(1)
         written.append(write_gif(frames, outdir / "animation.gif", fps=fps))
     return written

@@ -202,6 +202,7 @@ def main(argv: list[str] | None = None) -> int:
             tick = 0
             total_s = args.cycles * args.cycle_s
             last_cycle = -1
+            last_cx = -1e9
             while not stop.is_set():
                 el = time.monotonic() - t0
                 if el > total_s + args.hold:
@@ -214,9 +215,12 @@ def main(argv: list[str] | None = None) -> int:
                 for r in sorted(set(tokens) - present):
                     tokens.pop(r).undeclare()
                 t_sim = tick * dt
-                if cycle != last_cycle:
+                # during --hold the final complex is repeated each second, so a viewer that
+                # joins after the last cycle still gets it (the final state, as the help says)
+                if cycle != last_cycle or (el > total_s and el - last_cx >= 1.0):
                     pub_cx.put(sc.complex(cycle, t_sim).encode())
                     last_cycle = cycle
+                    last_cx = el
                 pub_truth.put(sc.truth(cycle, frac, tick, t_sim).encode())
                 pub_clock.put(m.Clock(tick=tick, t=t_sim, mode="realtime", rtf=1.0).encode())
                 if tick % max(1, int(args.tick_hz / 5)) == 0:

@@ -13,8 +13,17 @@ its own threads) only reads that store. Endpoints:
   /map     the map JSON (WorldInfo as polygons), refetched when ``map_version`` changes
   /healthz "ok"
 Robots alive are the liveliness tokens ``alive/robot/*``; robots drawn are the bodies in
-the latest Truth. The page exposes ``window.swarmState`` ({robots_drawn, robots_alive,
-cycle, ...}) and mirrors it into ``<pre id="swarm-state">`` for headless tests.
+the latest Truth. The page zooms (wheel, +/-) and pans (drag; double-click resets), shows a
+robot's id and state on hover, pauses (space or the button), draws a scale bar, and while
+nothing has arrived says which swarm and router it listens to. It exposes
+``window.swarmState`` ({robots_drawn, robots_alive, cycle, px_per_m, hover, paused, ...})
+and mirrors it into ``<pre id="swarm-state">`` for headless tests.
+
+``--foxglove`` also serves the same scene as swarmcover/scene.py's ``foxglove.SceneUpdate``
+on topic ``/swarmcover/scene`` through foxglove-sdk's WebSocket server (``--foxglove-port``,
+default 8766): in Foxglove or Lichtblick, "Open connection" -> Foxglove WebSocket ->
+``ws://127.0.0.1:8766``, and add a 3D panel. ``--ros2`` publishes the swarm to ROS 2 over
+Zenoh as rmw_zenoh does (swarmcover/ros2.py).
 """
 from __future__ import annotations
 
@@ -70,6 +79,7 @@ class LiveState:
         self.cx: m.Complex | None = None
         self.mocap: dict[int, tuple[float, float]] = {}
         self.alive: set[int] = set()
+        self.removed: set[int] = set()   # robots marked redundant so far (history)
         self.roles: dict[str, bool] = {r: False for r in _ROLES}
         self.coverage_fn, self.coverage_label = coverage_measure(coverage)
         self.coverage: float | None = None
@@ -91,6 +101,8 @@ class LiveState:
             self._cov_dirty = True
         elif isinstance(msg, m.Complex):
             self.cx = msg
+            occ = dict(zip(msg.vertices, msg.occupants))
+            self.removed |= {occ[v] for v in msg.redundant if occ.get(v, -1) >= 0}
         elif isinstance(msg, m.Pose):
             if msg.source == "mocap":
                 self.mocap[msg.robot] = (msg.x, msg.y)
@@ -126,11 +138,13 @@ class LiveState:
                 self.seq += 1
 
     def snapshot(self) -> dict:
-        """The page's state JSON: robots as [id, x, y, live, in_complex, redundant, alive]."""
-        sc = build_scene(self.truth, self.cx, self.mocap)
-        robots = [[int(i), _r(x), _r(y), int(lv), int(inc), int(red), int(int(i) in self.alive)]
-                  for i, (x, y), lv, inc, red in zip(sc.ids, sc.xy, sc.live, sc.in_complex,
-                                                     sc.redundant)]
+        """The page's state JSON: robots as [id, x, y, live, in_complex, redundant, alive,
+        removed] (removed: taken out of the complex as redundant, now outside it)."""
+        sc = build_scene(self.truth, self.cx, self.mocap, removed=self.removed)
+        robots = [[int(i), _r(x), _r(y), int(lv), int(inc), int(red), int(int(i) in self.alive),
+                   int(rm and not inc)]
+                  for i, (x, y), lv, inc, red, rm in zip(sc.ids, sc.xy, sc.live, sc.in_complex,
+                                                         sc.redundant, sc.removed)]
         seg = lambda a: a.reshape(-1, 4).round(4).tolist()  # noqa: E731
         cx = self.cx
         return {"seq": self.seq, "map_version": self.map_version,
@@ -227,10 +241,26 @@ class ViewServer:
     """
 
     def __init__(self, session, keys: Keys, *, host: str = "127.0.0.1", port: int = 8765,
-                 max_hz: float = 10.0, coverage: str = "auto", info_retry_s: float = 2.0):
+                 max_hz: float = 10.0, coverage: str = "auto", info_retry_s: float = 2.0,
+                 router: str = "", foxglove_port: int | None = None,
+                 ros2: dict | None = None):
         from bus.session import Mailbox, Receiver
         self.session = session
         self.keys = keys
+        self.router = router
+        self.scene = None
+        self.fox_server = None
+        self.fox_channel = None
+        self._scene_seq = -1
+        self._scene_at = -1e9
+        self.ros2 = None
+        self._ros2_seq = -1
+        self._ros2_at = -1e9
+        if foxglove_port is not None:
+            self._start_foxglove(host, foxglove_port)
+        if ros2 is not None:
+            from swarmcover.ros2 import Ros2Out
+            self.ros2 = Ros2Out(session, **ros2)
         self.state = LiveState(coverage=coverage)
         self.store = Snapshot()
         self.mailbox = Mailbox(maxsize=100_000)
@@ -248,6 +278,49 @@ class ViewServer:
         self.httpd = ThreadingHTTPServer((host, port), make_handler(self.store, template))
         self.httpd.daemon_threads = True
         self._http_thread: threading.Thread | None = None
+
+    def _start_foxglove(self, host: str, port: int) -> None:
+        import foxglove
+        from foxglove.channels import SceneUpdateChannel
+
+        from swarmcover.scene import SCENE_TOPIC, SceneState
+        self.scene = SceneState()
+        self.fox_context = foxglove.Context()
+        self.fox_channel = SceneUpdateChannel(SCENE_TOPIC, context=self.fox_context)
+        self.fox_server = foxglove.start_server(name=f"swarmcover {self.keys.swarm}", host=host,
+                                                port=port, context=self.fox_context)
+
+    @property
+    def foxglove_url(self) -> str | None:
+        if self.fox_server is None:
+            return None
+        host = self.httpd.server_address[0]
+        return f"ws://{host}:{self.fox_server.port}"
+
+    def _log_scene(self, now: float) -> None:
+        """Log the scene to the Foxglove server when it changed (and once a second anyway,
+        for clients that joined since: the protocol keeps no last message)."""
+        sc = self.scene
+        if sc is None or not sc.ready:
+            return
+        if now - self._scene_at < self.min_dt or (sc.seq == self._scene_seq
+                                                  and now - self._scene_at < 1.0):
+            return
+        self._scene_at = now
+        self._scene_seq = sc.seq
+        t_ns = time.time_ns()
+        self.fox_channel.log(sc.update(t_ns), log_time=t_ns)
+
+    def _ros2_publish(self, now: float) -> None:
+        st = self.state
+        if self.ros2 is None or st.seq == self._ros2_seq or now - self._ros2_at < self.min_dt:
+            return
+        self._ros2_at = now
+        self._ros2_seq = st.seq
+        try:
+            self.ros2.publish(st.info, st.truth, st.cx, st.mocap, time.time_ns())
+        except Exception as e:  # an output, never fatal to the view
+            log.warning("ROS 2 publish failed: %s", e)
 
     @property
     def url(self) -> str:
@@ -281,6 +354,8 @@ class ViewServer:
                 msg = self.receiver.decode(str(s.key_expr), s.payload.to_bytes(), m.WorldInfo)
                 if msg is not None:
                     self.state.set_info(msg)
+                    if self.scene is not None:
+                        self.scene.on_message(msg)
         except Exception as e:  # a failed query only delays the map
             log.warning("world/info query failed: %s", e)
 
@@ -294,6 +369,8 @@ class ViewServer:
             msg = self.receiver.decode(key, payload)
             if msg is not None:
                 self.state.on_message(key, msg)
+                if self.scene is not None:
+                    self.scene.on_message(msg)
             n += 1
         for key, _payload, kind in self.tokens.drain():
             present = kind == zenoh.SampleKind.PUT
@@ -308,6 +385,8 @@ class ViewServer:
             self._query_info()
         self.state.update_coverage(now)
         self._publish()
+        self._log_scene(now)
+        self._ros2_publish(now)
         return n
 
     def _publish(self, force: bool = False) -> None:
@@ -321,9 +400,21 @@ class ViewServer:
         if st.map_version != self._published_map:
             mp = map_json(st.info, st.map_version)
             self._published_map = st.map_version
-        self.store.put(st.snapshot(), mp)
+        snap = st.snapshot()
+        snap["swarm"] = self.keys.swarm
+        snap["router"] = self.router
+        self.store.put(snap, mp)
 
     def close(self) -> None:
+        if self.ros2 is not None:
+            self.ros2.close()
+            self.ros2 = None
+        if self.fox_server is not None:
+            try:
+                self.fox_server.stop()
+            except Exception:
+                pass
+            self.fox_server = None
         for s in self._subs:
             try:
                 s.undeclare()
@@ -350,11 +441,27 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--coverage", choices=KINDS, default="auto",
                    help="coverage shown in the header (default auto)")
     p.add_argument("--max-hz", type=float, default=10.0, help="state updates per second at most")
+    p.add_argument("--foxglove", action="store_true",
+                   help="also serve the scene to Foxglove/Lichtblick over foxglove-sdk's "
+                        "WebSocket server (topic /swarmcover/scene)")
+    p.add_argument("--foxglove-port", type=int, default=8766, metavar="PORT",
+                   help="WebSocket port of --foxglove (default 8766; 0 = any free)")
+    p.add_argument("--ros2", action="store_true",
+                   help="also publish to ROS 2 over Zenoh as rmw_zenoh does: <ns>/poses "
+                        "(geometry_msgs/PoseArray) and <ns>/complex "
+                        "(visualization_msgs/MarkerArray), frame 'map'")
+    p.add_argument("--ros-domain", type=int, default=0, metavar="N",
+                   help="ROS_DOMAIN_ID of --ros2 (default 0)")
+    p.add_argument("--ros-namespace", default="/swarmcover", metavar="NS",
+                   help="ROS namespace of the --ros2 topics (default /swarmcover)")
     p.add_argument("--log-level", default="INFO")
     add_zenoh_args(p)
     args = p.parse_args(argv)
     setup_logging(args.log_level, "swarmcover.view")
     keys = keys_from_args(args)
+    from bus.session import DEFAULT_ROUTER
+    router = ", ".join(args.connect or ([] if args.mode in ("peer", "router")
+                                        else [DEFAULT_ROUTER])) or f"{args.mode} mode"
     try:
         session = open_session(args)
     except (ValueError, ConnectionError) as e:
@@ -365,13 +472,27 @@ def main(argv: list[str] | None = None) -> int:
         with Shutdown() as stop:
             try:
                 view = ViewServer(session, keys, host=args.host, port=args.port,
-                                  max_hz=args.max_hz, coverage=args.coverage)
+                                  max_hz=args.max_hz, coverage=args.coverage, router=router,
+                                  foxglove_port=args.foxglove_port if args.foxglove else None,
+                                  ros2=({"domain": args.ros_domain,
+                                         "namespace": args.ros_namespace}
+                                        if args.ros2 else None))
+            except ValueError as e:  # --ros-domain / --ros-namespace
+                log.error("%s", e)
+                return 2
             except OSError as e:
                 log.error("--host %s --port %d: cannot serve: %s", args.host, args.port, e)
                 return 2
+            except RuntimeError as e:  # foxglove-sdk: port taken, bad host
+                log.error("--foxglove-port %d: cannot serve: %s", args.foxglove_port, e)
+                return 2
             view.start()
+            if view.foxglove_url:
+                print(f"READY foxglove {view.foxglove_url}", flush=True)
+            if view.ros2 is not None:
+                print("READY ros2 " + " ".join(view.ros2.topics.values()), flush=True)
             print(f"READY view {view.url}", flush=True)
-            log.info("live view of %s at %s", keys.prefix, view.url)
+            log.info("live view of %s (router %s) at %s", keys.prefix, router, view.url)
             while not stop.is_set():
                 view.pump(0.05)
     finally:

@@ -1,0 +1,119 @@
+"""The config reference: `swarmcover config defaults` is a complete, valid run config with
+every field of every section; docs/config.md is current; `config check` names errors."""
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from swarmcover.configref import check_text, defaults_toml, docs_markdown, sections
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _uncomment_optional(text: str) -> str:
+    """Turn the commented-out [hwbridge] tables on (as a user would for live robots)."""
+    out, on = [], False
+    for line in text.splitlines():
+        if line.startswith("# [hwbridge]"):
+            on = True
+        if on and line.startswith("# ") and not line.startswith(("# ----", "# Only", "#      ")):
+            line = line[2:]
+        out.append(line)
+    return "\n".join(out) + "\n"
+
+
+def test_defaults_parse_back_as_a_valid_config_with_every_default():
+    from agents.params import AgentParams, from_config
+    from coordinator.config import CoordinatorConfig
+    from world.config import RobotsConfig, SensingConfig, WorldConfig, loads_config
+    text = defaults_toml()
+    assert check_text(text) == ["map", "robots", "sensing", "world", "agent", "coordinator"]
+    raw = tomllib.loads(text)
+    cfg = loads_config(text)
+    assert cfg.robots == RobotsConfig() and cfg.sensing == SensingConfig()
+    assert cfg.world == WorldConfig()
+    assert from_config(raw) == AgentParams()
+    assert CoordinatorConfig.from_section(raw["coordinator"], 1.0) == CoordinatorConfig()
+    # every field of every owner's dataclass is in the file
+    assert set(raw["agent"]) == {f.name for f in dataclasses.fields(AgentParams)} - {
+        "kind", "v_max", "w_max", "radius", "rv", "n_touch", "dt"}
+    assert set(raw["coordinator"]) == {f.name for f in dataclasses.fields(CoordinatorConfig)} - {"rv"}
+    assert set(raw["world"]) == {f.name for f in dataclasses.fields(WorldConfig)}
+
+
+def test_the_commented_hwbridge_tables_are_valid_once_uncommented():
+    from hwbridge.config import BridgeConfig, loads
+    text = _uncomment_optional(defaults_toml())
+    assert "hwbridge" in check_text(text)
+    b = loads(text)
+    assert b.robots[0].id == 100 and b.robots[0].body == "scarab1"
+    assert (b.kp, b.deadman_s, b.fake) == (3.0, 0.3, BridgeConfig(
+        path="", name="", rv=1.0, robots=()).fake)
+
+
+def test_every_field_has_an_explanation_and_a_unit_column():
+    for sec in sections():
+        for f in sec.fields:
+            assert f.doc.strip(), f"[{sec.name}] {f.name}: no explanation"
+            assert f.unit, f"[{sec.name}] {f.name}: no unit"
+
+
+def test_docs_config_md_is_current():
+    assert (ROOT / "docs" / "config.md").read_text(encoding="utf-8") == docs_markdown(), (
+        "docs/config.md is stale: swarmcover config docs > docs/config.md")
+
+
+def test_cli_defaults_and_check(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "swarmcover", "config", "defaults"],
+                         capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert out.returncode == 0 and out.stdout == defaults_toml()
+    good = tmp_path / "good.toml"
+    good.write_text(out.stdout)
+    ok = subprocess.run([sys.executable, "-m", "swarmcover", "config", "check", str(good)],
+                        capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert ok.returncode == 0 and "valid" in ok.stdout
+    bad = tmp_path / "bad.toml"
+    bad.write_text(out.stdout.replace("eps_rv = 0.1", "eps_rv = 1.5"))
+    r = subprocess.run([sys.executable, "-m", "swarmcover", "config", "check", str(bad)],
+                       capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert r.returncode == 2 and "eps_rv = 1.5" in r.stderr and "bad.toml" in r.stderr
+    assert "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("name", ["small.toml", "tiny.toml", "mixed.toml"])
+def test_shipped_configs_check(name):
+    path = ROOT / "configs" / name
+    check_text(path.read_text(), str(path), str(path.parent))
+
+
+def test_examples_config_checks_and_topology_example_certifies():
+    path = ROOT / "examples" / "l_room.toml"
+    checked = check_text(path.read_text(), str(path), str(path.parent))
+    assert "coordinator" in checked
+    out = subprocess.run([sys.executable, str(ROOT / "examples" / "topology_core.py")],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "10 vertices" in out.stdout and "bounds a 2-chain: True" in out.stdout
+
+
+def test_completed_resolved_toml_holds_every_agent_and_coordinator_value():
+    from agents.params import AgentParams, from_config
+    from coordinator.config import CoordinatorConfig
+    from swarmcover.configref import complete_resolved_toml
+    from world.config import load_config, to_toml
+    cfg = load_config(ROOT / "configs" / "small.toml")
+    full = complete_resolved_toml(to_toml(cfg))
+    raw = tomllib.loads(full)
+    assert len(raw["agent"]) == len(dataclasses.fields(AgentParams)) - 7
+    assert len(raw["coordinator"]) == len(dataclasses.fields(CoordinatorConfig)) - 1
+    # the values are the ones the components resolve from the original file
+    orig = tomllib.loads((ROOT / "configs" / "small.toml").read_text())
+    assert from_config(raw) == from_config(orig)
+    assert (CoordinatorConfig.from_section(raw["coordinator"], cfg.rv)
+            == CoordinatorConfig.from_section(orig.get("coordinator"), cfg.rv))
+    check_text(full)
