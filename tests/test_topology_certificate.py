@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -10,8 +12,11 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from coordinator import (TopologyParams, boundary_of, build_complex, certify, detect_fence, is_cocycle,
-                         verify_certificate)
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from coordinator import (TopologyParams, boundary_of, build_complex, certify, closure_zone, detect_fence,
+                         is_cocycle, verify_certificate)
 from test_topology_geom import boundary_edges_near, lattice, reports
 
 seeds = st.integers(min_value=0, max_value=2**32 - 1)
@@ -280,3 +285,109 @@ def test_the_slack_search_cannot_hide_a_hole_away_from_the_odd_vertices():
                                 z_repair=np.array([far_e]))
         cert = certify(cx, fence)
         assert cert.certified == all(fenced) and verify_certificate(cx, cert)
+
+
+# ----------------------------------------------------------------- the one criterion
+def _crossing_fence():
+    """A fence whose one-sided edges leave odd vertices: the pillar_hall end state."""
+    reps, tdf, pos = _pillar_hall_end()
+    cx = build_complex(reps)
+    return cx, detect_fence(cx, TopologyParams(), test_drive_failures=tdf)
+
+
+def test_verify_checks_the_closure_zone_and_the_cycle():
+    cx, f = _crossing_fence()
+    cert = certify(cx, f)
+    assert cert.certified and cert.closure.size and cert.closable
+    assert verify_certificate(cx, cert, f) and verify_certificate(cx, cert)
+    odd, zone = closure_zone(cx, np.isin(np.arange(cx.n_edges), f.z_raw))
+    assert set(cert.closure.tolist()) <= set(zone.tolist()) and odd.size
+    assert set(cx.ids[odd].tolist()) == set(cert.odd_vertices.tolist())
+    # the same chain is not a certificate of the raw edges as an exact target
+    assert not verify_certificate(cx, cert, f.z_raw)
+    # a closure edge outside the zone is refused, even with a matching chain
+    out = np.setdiff1d(np.arange(cx.n_edges), np.concatenate([zone, f.z_raw]))
+    out = out[np.diff(cx.edge_triangles[0])[out] > 0]
+    tri = int(cx.edge_triangles[1][cx.edge_triangles[0][out[len(out) // 2]]])
+    bad_chain = np.setxor1d(cert.chain, [tri])
+    bz = boundary_of(cx, bad_chain)
+    bad = replace(cert, chain=bad_chain, z=np.nonzero(bz)[0],
+                  closure=np.nonzero(bz & ~np.isin(np.arange(cx.n_edges), f.z_raw))[0])
+    assert not verify_certificate(cx, bad, f)
+    # z must be the target plus the closure
+    assert not verify_certificate(cx, replace(cert, z=f.z_raw), f)
+
+
+def test_refusal_with_odd_vertices_carries_a_cocycle_that_misses_the_zone():
+    # a lattice strip whose raw target is one side of it only: no closure near its two
+    # ends can bound, and the obstruction proves it
+    P = lattice(3, 8, 0.8)
+    cx = build_complex(reports(P))
+    f = detect_fence(cx)
+    raw = np.array(f.z_raw)
+    pos = P[cx.index(cx.ids)]
+    mid = pos[cx.edges[raw]].mean(1)
+    half = raw[mid[:, 1] < pos[:, 1].mean()]  # the bottom side of the strip only
+    fake = SimpleNamespace(z_raw=half, z_repair=np.zeros(0, np.int64))
+    cert = certify(cx, fake)
+    assert not cert.certified and cert.obstruction.size and is_cocycle(cx, cert.obstruction)
+    odd, zone = closure_zone(cx, np.isin(np.arange(cx.n_edges), half))
+    assert not set(cert.obstruction.tolist()) & set(zone.tolist())
+    assert verify_certificate(cx, cert, fake) and cert.stats["reason"].startswith("no closure")
+
+
+def test_empty_targets_never_certify():
+    # a Fence with no one-sided edge (a single file, a lone robot) is refused, not an error
+    P = np.array([[0.0, 0.0], [0.8, 0.0], [1.6, 0.0]])
+    cx = build_complex(reports(P))
+    f = detect_fence(cx)
+    assert f.z_raw.size == 0
+    cert = certify(cx, f)
+    assert not cert.certified and cert.stats["reason"].startswith("empty target")
+    assert verify_certificate(cx, cert, f)
+    forged = replace(cert, certified=True, chain=np.zeros(0, np.int64))
+    assert not verify_certificate(cx, forged, f)
+    lone = build_complex({7: {"neighbours": {}}})
+    assert not certify(lone, detect_fence(lone)).certified
+    # an explicit empty target is a caller's error
+    for empty in ([], np.zeros(cx.n_edges, bool), np.zeros((0, 2), np.int64)):
+        with pytest.raises(ValueError, match="no edge"):
+            certify(cx, empty)
+        with pytest.raises(ValueError, match="no edge"):
+            verify_certificate(cx, cert, empty)
+    # one-sided edges but no triangle: refused with an obstruction
+    Q = np.array([[0.0, 0.0], [0.9, 0.0], [0.45, 0.8]])
+    cq = build_complex(reports(Q))
+    c2 = certify(cq, [[0, 1], [1, 2]])
+    assert not c2.certified and verify_certificate(cq, c2)
+
+
+def test_malformed_targets_and_certificates_are_rejected():
+    P = lattice(4, 4, 0.8)
+    cx = build_complex(reports(P))
+    f = detect_fence(cx)
+    cert = certify(cx, f)
+    assert cert.certified
+    z = list(f.z_raw)
+    with pytest.raises(ValueError, match=r"target edge ids repeat .*\[%d\]" % z[0]):
+        certify(cx, z + [z[0]])
+    with pytest.raises(ValueError, match="target edge ids repeat"):
+        verify_certificate(cx, cert, z + [z[0]])
+    pairs = cx.edge_nodes(f.z_raw)
+    with pytest.raises(ValueError, match=r"node pairs\) repeat"):
+        certify(cx, np.vstack([pairs, pairs[:1, ::-1]]))
+    with pytest.raises(ValueError, match=r"target edge ids out of range"):
+        certify(cx, [-1] + z[1:])
+    with pytest.raises(ValueError, match="integer ids"):
+        certify(cx, np.array(z, float) + 0.5)
+    for chain, msg in (([-1], r"chain triangle ids out of range \[0, %d\): \[-1\]" % cx.n_triangles),
+                       (list(cert.chain) + [int(cert.chain[0])], "chain triangle ids repeat"),
+                       ([cx.n_triangles], "out of range")):
+        with pytest.raises(ValueError, match=msg):
+            verify_certificate(cx, replace(cert, chain=np.array(chain)), f)
+    with pytest.raises(ValueError, match="obstruction edge ids repeat"):
+        verify_certificate(cx, replace(cert, certified=False, obstruction=np.array([0, 0])), f)
+    # a negative id that numpy would have read from the end is refused, not wrapped
+    t = cx.n_triangles
+    with pytest.raises(ValueError):
+        verify_certificate(cx, replace(cert, chain=np.where(cert.chain == t - 1, -1, cert.chain)), f)
