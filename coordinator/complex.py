@@ -45,6 +45,12 @@ def _node_ids(keys, where: str) -> list[int]:
     """Node ids from mapping keys: all ints (Python or numpy) or all decimal strings, none
     negative, no two naming the same robot; ValueError naming the problem otherwise."""
     keys = list(keys)
+    if all(type(k) is int for k in keys):  # the common case: plain ints, one per robot
+        if keys and min(keys) < 0:
+            raise ValueError(f"{where}: negative robot ids {[k for k in keys if k < 0][:5]} (ids must be >= 0)")
+        if len(set(keys)) != len(keys):
+            raise ValueError(f"{where}: robot ids repeat: {keys}")
+        return keys
     kinds = set()
     out = []
     for k in keys:
