@@ -4,7 +4,8 @@ Works on node ids, neighbour bearings (rad, body frame) and touch flags; never m
 positions (``shape`` estimates the swarm's shape from those bearings).
 """
 from .angles import circular_mean, wrap
-from .certificate import Certificate, boundary_of, certify, fence_cycle, is_cocycle, verify_certificate
+from .certificate import (Certificate, boundary_of, certify, certificate_from_chain, closure_zone, fence_cycle,
+                          is_cocycle, verify_certificate)
 from .complex import Complex, RobotReport, add_robot, as_report, build_complex, remove_robot
 from .fence import Deployment, Fence, FenceEdge, FenceSide, detect_fence
 from .gvg import GVG, compute_gvg, gvg_thin, gvg_wavefront, obstacle_segments
@@ -35,6 +36,8 @@ __all__ = [
     "boundary_of",
     "is_cocycle",
     "fence_cycle",
+    "closure_zone",
+    "certificate_from_chain",
     "Redundancy",
     "find_redundant",
     "link_is_acyclic",

@@ -1,27 +1,42 @@
 """Coverage certificate by relative homology over GF(2) (spec section 5.2-5.3).
 
-Given the complex R and the one-sided fence edges z, find a 2-chain c (a set of
-triangles) with boundary(c) = z, or prove that none exists.
+The criterion (the only one: :func:`certify` decides it, :func:`verify_certificate`
+checks it). The *target* is a set of edges z_raw: a Fence's one-sided fence edges
+(``Fence.z_raw``) or an explicit edge set. Its *closure zone* S is, for a Fence, every
+edge outside z_raw with both ends within one hop of an odd-degree vertex of z_raw (empty
+when z_raw is a cycle, and always empty for an explicit edge set). The target is
+*certified* when z_raw is not empty and a set of triangles alpha (the chain) and a set
+f of zone edges (the closure) satisfy boundary(alpha) = z_raw + f over GF(2); z = z_raw
++ f is the certificate's cycle. Otherwise it is *refused*, with an obstruction: a cocycle
+psi (every triangle has an even number of edges in psi) that misses S and meets z_raw an
+odd number of times, which proves that no such alpha and f exist. Exactly one of the two
+holds (Fredholm alternative). An empty target is refused without an obstruction.
+
+Why it means coverage (robots at their true positions, every edge at most rv long with
+line of sight): for a point x on no edge, the number of triangles of alpha containing x
+and the number of edges of z crossed by a ray from x agree mod 2 (true for one triangle,
+and summing over alpha counts each edge boundary(alpha)_e times). So every point that z
+encloses an odd number of times lies in a triangle of alpha, within rv of each of its
+three robots (README, "The topology core").
 
 How it is solved (all on the complex alone, no positions):
 
-1. z must be a cycle (even degree at every vertex); if not, the star of an odd vertex
-   is an obstruction.
-2. A spanning forest (BFS from a central vertex) fixes a vertex order. The rows of the
-   forest edges are redundant once z is a cycle and are dropped.
-3. A lower-star discrete Morse matching pairs every other edge (u, v) (v the later
+1. A spanning forest (BFS from a central vertex) fixes a vertex order. The rows of the
+   forest edges are redundant for cycles and are dropped.
+2. A lower-star discrete Morse matching pairs every other edge (u, v) (v the later
    vertex) with a triangle of v's lower link (BFS inside the lower link, done for all
    links at once by scipy on the "link graph"). Unmatched edges are *critical rows*,
    unmatched triangles *critical columns*.
-4. With critical columns set to 0, the matched rows form a triangular system; it is
+3. With critical columns set to 0, the matched rows form a triangular system; it is
    solved by peeling (an edge with one undetermined triangle fixes that triangle),
    vectorised round by round. The residual on the (few) critical rows is then fixed
    with critical triangles through the Schur complement, computed by one transposed
-   peeling pass with the critical rows packed as bits (inactivation).
-5. If the residual is not in the span, a cocycle phi (a set of edges meeting every
-   triangle an even number of times with |phi & z| odd) proves that no c exists.
-
-Both outcomes carry a cheap, independent check: :func:`verify_certificate`.
+   peeling pass with the critical rows packed as bits (inactivation): the forms phi.
+4. A target with odd vertices is closed by one more elimination (coordinator.gf2):
+   z_raw + f is a boundary iff it is a cycle and its forms lie in the span of the
+   critical triangles' forms, both linear in f. The Fence's shortest T-join
+   (``Fence.z_repair``) is tried first when it lies in the zone.
+5. When the residual is not in the span, the witness y of the elimination gives psi.
 """
 from __future__ import annotations
 
@@ -32,6 +47,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
+from . import gf2
 from .complex import Complex
 
 __all__ = [
@@ -41,27 +57,36 @@ __all__ = [
     "boundary_of",
     "is_cocycle",
     "fence_cycle",
+    "closure_zone",
     "certificate_from_chain",
 ]
 
 _I64 = np.int64
+_EMPTY = np.zeros(0, dtype=_I64)
+
+
+def _empty() -> np.ndarray:
+    return _EMPTY
 
 
 @dataclass(frozen=True, eq=False)
 class Certificate:
     """Result of :func:`certify`.
 
-    certified: True when boundary(chain) = z.
-    z: edge ids (into ``Complex.edges``) of the target cycle.
-    chain: triangle ids of c (empty when not certified).
-    obstruction: edge ids of a cocycle phi with |phi & z| odd (empty when certified).
-    hole_edges: when not certified, edge ids of a cycle homologous to z that could not be
+    certified: True when boundary(chain) = z = target + closure (module docstring).
+    z: edge ids (into ``Complex.edges``) of the certified cycle (the target when refused).
+    chain: triangle ids of alpha (empty when refused).
+    obstruction: edge ids of a cocycle psi missing the closure zone with |psi & target|
+      odd (empty when certified, and when the target is empty).
+    hole_edges: when refused, edge ids of a cycle homologous to z that could not be
       filled further by pushing z inward (around the uncovered hole on planar-like
-      complexes; the odd-degree fence edges when z is not a cycle).
-    odd_vertices: node ids where z has odd degree (z not a cycle).
-    nodes: node-id views: ``chain_nodes`` (k, 3), ``hole_edge_nodes`` (k, 2),
-      ``support`` (node ids of the vertices of the chain).
-    stats: counts from the solver (critical rows, peeling rounds, core size).
+      complexes; the target's edges at its odd vertices when it is not a cycle).
+    odd_vertices: node ids where the target has odd degree.
+    chain_nodes (k, 3), hole_edge_nodes (k, 2), support: node-id views (support = the
+      vertices of the chain).
+    stats: counts from the solver (critical rows, peeling rounds, core size, closure).
+    target: edge ids of z_raw. closure: edge ids of f. closable: whether the target has
+      a closure zone (a Fence's one-sided edges) or is an explicit, exact target.
     """
 
     certified: bool
@@ -74,15 +99,43 @@ class Certificate:
     hole_edge_nodes: np.ndarray
     support: np.ndarray
     stats: Mapping[str, Any] = field(default_factory=dict)
+    target: np.ndarray = field(default_factory=_empty)
+    closure: np.ndarray = field(default_factory=_empty)
+    closable: bool = False
 
     def __bool__(self) -> bool:
         return self.certified
 
 
 # --------------------------------------------------------------------------- helpers
-def _as_edge_mask(cx: Complex, z) -> np.ndarray:
-    """Accept a Fence (uses .z), a bool mask (E,), edge ids, or (k, 2) node-id pairs."""
-    if hasattr(z, "z") and not isinstance(z, np.ndarray):
+def _ids(a, n: int, what: str, where: str) -> np.ndarray:
+    """Validated ids (ints in [0, n), no repeats) as int64; ValueError naming the problem."""
+    arr = np.asarray(a)
+    if arr.size == 0:
+        return _EMPTY
+    if arr.dtype == bool or not np.issubdtype(arr.dtype, np.integer):
+        if np.issubdtype(arr.dtype, np.floating) and np.all(np.isfinite(arr)) and np.all(arr == np.round(arr)):
+            arr = arr.astype(_I64)
+        else:
+            raise ValueError(f"{where}: {what} must be integer ids, got dtype {arr.dtype}")
+    arr = arr.astype(_I64).ravel()
+    bad = arr[(arr < 0) | (arr >= n)]
+    if bad.size:
+        raise ValueError(f"{where}: {what} out of range [0, {n}): {bad[:5].tolist()}")
+    u, c = np.unique(arr, return_counts=True)
+    if np.any(c > 1):
+        raise ValueError(f"{where}: {what} repeat (a repeated id would cancel over GF(2)): "
+                         f"{u[c > 1][:5].tolist()}")
+    return arr
+
+
+def _is_fence(t) -> bool:
+    return not isinstance(t, np.ndarray) and hasattr(t, "z_raw")
+
+
+def _as_edge_mask(cx: Complex, z, where: str = "certify") -> np.ndarray:
+    """An explicit target: a bool mask (E,), edge ids, or (k, 2) node-id pairs."""
+    if not isinstance(z, np.ndarray) and hasattr(z, "z"):
         z = z.z
     a = np.asarray(z)
     m = np.zeros(cx.n_edges, dtype=bool)
@@ -90,18 +143,48 @@ def _as_edge_mask(cx: Complex, z) -> np.ndarray:
         return m
     if a.dtype == bool:
         if a.shape != (cx.n_edges,):
-            raise ValueError("boolean edge mask has the wrong length")
+            raise ValueError(f"{where}: boolean edge mask has length {a.shape}, the complex has "
+                             f"{cx.n_edges} edges")
         return a.copy()
     if a.ndim == 2 and a.shape[1] == 2:
         loc = cx.index(a.ravel()).reshape(-1, 2)
         e = cx.edge_index(loc[:, 0], loc[:, 1])
         if np.any(e < 0):
-            raise KeyError("some fence edges are not edges of the complex")
-        np.logical_xor.at(m, e, True)
-        return m
-    e = a.astype(_I64).ravel()
-    np.logical_xor.at(m, e, True)
+            raise KeyError(f"{where}: some target edges are not edges of the complex: "
+                           f"{a[e < 0][:5].tolist()}")
+        e = _ids(e, cx.n_edges, "target edges (node pairs)", where)
+    else:
+        e = _ids(a, cx.n_edges, "target edge ids", where)
+    m[e] = True
     return m
+
+
+def _target(cx: Complex, target, where: str) -> tuple[np.ndarray, bool]:
+    """(mask of z_raw, closable). A Fence gives its one-sided edges and a closure zone;
+    an explicit edge set must not be empty."""
+    if _is_fence(target):
+        m = np.zeros(cx.n_edges, dtype=bool)
+        m[_ids(target.z_raw, cx.n_edges, "Fence.z_raw edge ids", where)] = True
+        return m, True
+    m = _as_edge_mask(cx, target, where)
+    if not m.any():
+        raise ValueError(f"{where}: the target has no edge (an empty cycle certifies nothing)")
+    return m, False
+
+
+def closure_zone(cx: Complex, z_raw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(odd vertices (local indices), zone edge ids) of a target edge mask: the edges
+    outside z_raw with both ends within one hop of an odd-degree vertex of z_raw."""
+    if not z_raw.any():
+        return _EMPTY, _EMPTY
+    odd = (np.bincount(cx.edges[z_raw].ravel(), minlength=cx.n) & 1).astype(bool)
+    if not odd.any():
+        return _EMPTY, _EMPTY
+    u, v = cx.edges[:, 0], cx.edges[:, 1]
+    near = odd.copy()
+    near[v[odd[u]]] = True
+    near[u[odd[v]]] = True
+    return np.nonzero(odd)[0], np.nonzero(near[u] & near[v] & ~z_raw)[0]
 
 
 def boundary_of(cx: Complex, chain) -> np.ndarray:
@@ -123,17 +206,43 @@ def is_cocycle(cx: Complex, edges) -> bool:
     return not np.any(m[cx.tri_edges].sum(1) & 1)
 
 
-def verify_certificate(cx: Complex, cert: Certificate, z=None) -> bool:
-    """Independent cheap check of a certificate (either outcome).
+def verify_certificate(cx: Complex, cert: Certificate, target=None) -> bool:
+    """Check the criterion of the module docstring on a certificate (either outcome).
 
-    Certified: boundary(chain) == z. Not certified: the obstruction is a cocycle and
-    meets z an odd number of times. ``z`` defaults to ``cert.z``.
+    target: a Fence (its one-sided edges, with their closure zone), an explicit edge set
+    (no closure), or None for the certificate's own target. ValueError for malformed
+    certificates (negative, out-of-range or repeated ids) and empty explicit targets.
+    Certified: the chain is not empty, the closure lies in the zone and boundary(chain)
+    = target + closure = cert.z. Refused: the obstruction is a cocycle that misses the
+    zone and meets the target an odd number of times; or the target is empty.
     """
-    zm = _as_edge_mask(cx, cert.z if z is None else z)
+    where = "verify_certificate"
+    if target is None:
+        zm = np.zeros(cx.n_edges, dtype=bool)
+        zm[_ids(cert.target, cx.n_edges, "certificate target edge ids", where)] = True
+        closable = bool(cert.closable)
+        if not closable and not zm.any():
+            raise ValueError(f"{where}: the certificate's target has no edge")
+    else:
+        zm, closable = _target(cx, target, where)
+    chain = _ids(cert.chain, cx.n_triangles, "chain triangle ids", where)
+    ob = _ids(cert.obstruction, cx.n_edges, "obstruction edge ids", where)
+    f = _ids(cert.closure, cx.n_edges, "closure edge ids", where)
+    zc = _ids(cert.z, cx.n_edges, "certificate cycle edge ids", where)
+    if not zm.any():
+        return not cert.certified
+    _, zone = closure_zone(cx, zm) if closable else (_EMPTY, _EMPTY)
+    in_zone = np.zeros(cx.n_edges, dtype=bool)
+    in_zone[zone] = True
     if cert.certified:
-        return bool(np.array_equal(boundary_of(cx, cert.chain), zm))
-    ob = np.asarray(cert.obstruction, dtype=_I64)
-    if ob.size == 0:
+        if chain.size == 0 or not np.all(in_zone[f]):
+            return False
+        z = zm.copy()
+        z[f] = True  # f lies outside z_raw
+        zc_m = np.zeros(cx.n_edges, dtype=bool)
+        zc_m[zc] = True
+        return bool(np.array_equal(zc_m, z) and np.array_equal(boundary_of(cx, chain), z))
+    if ob.size == 0 or np.any(in_zone[ob]):
         return False
     return is_cocycle(cx, ob) and bool(zm[ob].sum() & 1)
 
@@ -145,31 +254,53 @@ def _support(cx: Complex, chain: np.ndarray) -> np.ndarray:
     return cx.ids[m]
 
 
-def certificate_from_chain(cx: Complex, z, chain, stats: Mapping[str, Any] | None = None) -> Certificate:
-    """Wrap a known chain as a Certificate; raises ValueError unless boundary(chain) = z."""
-    zm = _as_edge_mask(cx, z)
-    chain = np.sort(np.asarray(chain, dtype=_I64).ravel())
+def _make(cx: Complex, ok: bool, z: np.ndarray, chain, ob, hole, odd, stats, target: np.ndarray,
+          closure, closable: bool) -> Certificate:
+    chain = np.sort(np.asarray(chain, dtype=_I64))
+    hole = np.asarray(hole, dtype=_I64)
+    return Certificate(
+        certified=ok,
+        z=np.nonzero(z)[0],
+        chain=chain,
+        obstruction=np.sort(np.asarray(ob, dtype=_I64)),
+        hole_edges=hole,
+        odd_vertices=np.asarray(odd, dtype=_I64),
+        chain_nodes=cx.ids[cx.triangles[chain]] if chain.size else np.zeros((0, 3), _I64),
+        hole_edge_nodes=cx.ids[cx.edges[hole]] if hole.size else np.zeros((0, 2), _I64),
+        support=_support(cx, chain),
+        stats=stats,
+        target=np.nonzero(target)[0],
+        closure=np.sort(np.asarray(closure, dtype=_I64)),
+        closable=closable,
+    )
+
+
+def certificate_from_chain(cx: Complex, z, chain, stats: Mapping[str, Any] | None = None, *,
+                           like: Certificate | None = None) -> Certificate:
+    """Wrap a known chain as a certified Certificate for the explicit cycle z (or, with
+    ``like``, for ``like``'s target and closure, z = like.z); ValueError unless the chain's
+    triangle ids are valid and boundary(chain) = z."""
+    where = "certificate_from_chain"
+    zm = _as_edge_mask(cx, z, where)
+    chain = np.sort(_ids(chain, cx.n_triangles, "chain triangle ids", where))
+    if not zm.any() or chain.size == 0:
+        raise ValueError(f"{where}: an empty cycle or chain certifies nothing")
     if not np.array_equal(boundary_of(cx, chain), zm):
-        raise ValueError("boundary(chain) != z")
-    chain_nodes = cx.ids[cx.triangles[chain]] if chain.size else np.zeros((0, 3), _I64)
-    e = np.zeros(0, dtype=_I64)
-    return Certificate(True, np.nonzero(zm)[0], chain, e, e, e, chain_nodes, np.zeros((0, 2), _I64),
-                       _support(cx, chain), dict(stats or {}))
+        raise ValueError(f"{where}: boundary(chain) != z")
+    if like is not None:
+        tm = np.zeros(cx.n_edges, dtype=bool)
+        tm[like.target] = True
+        if not np.array_equal(tm ^ zm, np.isin(np.arange(cx.n_edges), like.closure)):
+            raise ValueError(f"{where}: z is not the target plus the closure of ``like``")
+        return _make(cx, True, zm, chain, _EMPTY, _EMPTY, like.odd_vertices, dict(stats or {}), tm,
+                     like.closure, like.closable)
+    return _make(cx, True, zm, chain, _EMPTY, _EMPTY, _EMPTY, dict(stats or {}), zm, _EMPTY, False)
 
 
 def fence_cycle(cx: Complex, fence) -> np.ndarray:
-    """Edge ids of the certificate target z from a Fence (or anything :func:`certify` takes)."""
-    return np.nonzero(_as_edge_mask(cx, fence))[0]
-
-
-def _sym_csr(rows: np.ndarray, cols: np.ndarray, n: int) -> csr_matrix:
-    """Symmetric float64 CSR adjacency (for scipy csgraph with directed=True, no copies)."""
-    r = np.concatenate([rows, cols])
-    c = np.concatenate([cols, rows])
-    order = np.argsort(r)
-    indptr = np.zeros(n + 1, dtype=np.int32)
-    np.cumsum(np.bincount(r, minlength=n), out=indptr[1:])
-    return csr_matrix((np.ones(r.shape[0]), c[order].astype(np.int32), indptr), shape=(n, n))
+    """Edge ids of the certificate's target: a Fence's one-sided edges ``z_raw`` (or an
+    explicit edge set, validated)."""
+    return np.nonzero(_target(cx, fence, "fence_cycle")[0])[0]
 
 
 def _dedupe(a: np.ndarray) -> np.ndarray:
@@ -180,16 +311,6 @@ def _dedupe(a: np.ndarray) -> np.ndarray:
     keep[0] = True
     np.not_equal(a[1:], a[:-1], out=keep[1:])
     return a[keep]
-
-
-def _gather_csr(indptr: np.ndarray, data: np.ndarray, rows: np.ndarray):
-    """Concatenated CSR rows and, for each entry, the position of its row in ``rows``."""
-    cnt = indptr[rows + 1] - indptr[rows]
-    tot = int(cnt.sum())
-    if tot == 0:
-        return data[:0], np.zeros(0, dtype=_I64)
-    start = np.repeat(indptr[rows] - (np.cumsum(cnt) - cnt), cnt)
-    return data[start + np.arange(tot, dtype=_I64)], np.repeat(np.arange(rows.shape[0], dtype=_I64), cnt)
 
 
 # --------------------------------------------------------------------- Morse matching
@@ -368,59 +489,6 @@ def _to_int(row: np.ndarray) -> int:
     return int.from_bytes(row.astype("<u8").tobytes(), "little")
 
 
-def _solve_patterns(patterns: list[int], target: int):
-    """GF(2): find a subset of ``patterns`` XOR-ing to ``target``.
-
-    Returns (subset indices, None) or (None, y) with y a bit mask orthogonal to every
-    pattern and with odd overlap with ``target``.
-    """
-    basis: dict[int, tuple[int, int]] = {}  # pivot bit -> (vector, combination mask)
-    for i, p in enumerate(patterns):
-        comb = 1 << i
-        while p:
-            hb = p.bit_length() - 1
-            b = basis.get(hb)
-            if b is None:
-                basis[hb] = (p, comb)
-                break
-            p ^= b[0]
-            comb ^= b[1]
-    r, comb = target, 0
-    while r:
-        hb = r.bit_length() - 1
-        b = basis.get(hb)
-        if b is None:
-            break
-        r ^= b[0]
-        comb ^= b[1]
-    if r == 0:
-        out, i = [], 0
-        while comb:
-            if comb & 1:
-                out.append(i)
-            comb >>= 1
-            i += 1
-        return out, None
-    # fully reduce the basis, then build y (supported on one free bit + pivots)
-    piv = sorted(basis)
-    vec = {hb: basis[hb][0] for hb in piv}
-    for hb in piv:  # clear hb from every other basis vector
-        vh = vec[hb]
-        for other in piv:
-            if other != hb and (vec[other] >> hb) & 1:
-                vec[other] ^= vh
-    # reduce r against the fully reduced basis so it is zero on all pivots
-    for hb in piv:
-        if (r >> hb) & 1:
-            r ^= vec[hb]
-    q = r.bit_length() - 1  # a non-pivot bit where r is 1
-    y = 1 << q
-    for hb in piv:
-        if (vec[hb] >> q) & 1:
-            y |= 1 << hb
-    return None, y
-
-
 # ------------------------------------------------------------------------- witnesses
 def _flow_witness(cx: Complex, z: np.ndarray, max_rounds: int = 100000) -> np.ndarray:
     """Push z inward: while an edge of the current cycle has exactly one unused triangle,
@@ -452,159 +520,187 @@ def _flow_witness(cx: Complex, z: np.ndarray, max_rounds: int = 100000) -> np.nd
     return r
 
 
-# ------------------------------------------------------------------- fence closure
-def _slack_closure(cx: Complex, fence, phi: np.ndarray, n_crit: int,
-                   patterns: list[int]) -> np.ndarray | None:
-    """Another closure of a Fence's raw one-sided edges z_raw that is a boundary: the edge
-    mask z_raw + f, f made of edges outside z_raw with both ends within one hop of an odd
-    vertex of z_raw; None if there is none (or z_raw had no odd vertex).
+# --------------------------------------------------------------------------- solver
+class _Solver:
+    """The forest, the Morse matching and (lazily) the forms phi of one complex: shared
+    by every target solved on it."""
 
-    Over GF(2), z_raw + f is a boundary iff it is a cycle (f's odd vertices are z_raw's)
-    and its forms phi lie in the span of the critical triangles' ``patterns``; both are
-    linear in f, so one elimination decides it: columns are the patterns (vertex part 0)
-    and each slack edge (its phi bits, then bits for its two vertices above bit n_crit).
-    """
-    if getattr(fence, "z_raw", None) is None or not fence.z_repair.size:
-        return None
-    base = np.zeros(cx.n_edges, dtype=bool)
-    base[np.asarray(fence.z_raw, dtype=_I64)] = True
-    odd = (np.bincount(cx.edges[base].ravel(), minlength=cx.n) & 1).astype(bool)
-    u, v = cx.edges[:, 0], cx.edges[:, 1]
-    near = odd.copy()
-    near[v[odd[u]]] = True
-    near[u[odd[v]]] = True
-    slack = np.nonzero(near[u] & near[v] & ~base)[0]
-    if not slack.size:
-        return None
-    cols = list(patterns)
-    k0 = len(cols)
-    for e, a, b in zip(slack.tolist(), u[slack].tolist(), v[slack].tolist()):
-        cols.append(_to_int(phi[e]) | (1 << (n_crit + a)) | (1 << (n_crit + b)))
-    target = _to_int(np.bitwise_xor.reduce(phi[base], axis=0)) if base.any() else 0
-    for a in np.nonzero(odd)[0].tolist():
-        target ^= 1 << (n_crit + a)
-    subset, _ = _solve_patterns(cols, target)
-    if subset is None:
-        return None
-    base[slack[[i - k0 for i in subset if i >= k0]]] ^= True
-    return base
+    def __init__(self, cx: Complex, seed: int | None, stats: dict):
+        self.cx = cx
+        self.stats = stats
+        self.rank, self.tree = _vertex_forest(cx, seed)
+        self.match, self.crit = _lower_star_matching(cx, self.rank, self.tree)
+        stats["critical_rows"] = int(self.crit.size)
+        stats["matched"] = int((self.match >= 0).sum())
+        self.rounds = None
+        self._core = None
+
+    def _forward(self, z: np.ndarray):
+        x, rhs, rounds = _forward(self.cx, z, self.tree, self.match)
+        if self.rounds is None:
+            self.rounds = rounds
+            self.stats["rounds"] = len(rounds)
+        return x, rhs
+
+    def core(self):
+        """(phi (E, W) uint64, patterns (ints), representative critical triangles)."""
+        if self._core is None:
+            cx, crit = self.cx, self.crit
+            if self.rounds is None:
+                self._forward(np.zeros(cx.n_edges, dtype=bool))
+            W = max(1, (crit.size + 63) // 64)
+            phi = _transpose_forms(cx, self.tree, crit, self.rounds, W)
+            is_matched_col = np.zeros(cx.n_triangles, dtype=bool)
+            is_matched_col[self.match[self.match >= 0]] = True
+            ccols = np.nonzero(~is_matched_col)[0]
+            te = cx.tri_edges
+            S = phi[te[ccols, 0]] ^ phi[te[ccols, 1]] ^ phi[te[ccols, 2]]
+            nz = np.any(S != 0, axis=1)
+            ccols, S = ccols[nz], S[nz]
+            if S.shape[0]:
+                if W == 1:
+                    u1, first = np.unique(S[:, 0], return_index=True)
+                    uniq = u1[:, None]
+                else:
+                    uniq, first = np.unique(S, axis=0, return_index=True)
+                reps = ccols[first]
+            else:
+                uniq, reps = S, ccols
+            self._core = (phi, [_to_int(row) for row in uniq], reps)
+            self.stats["core"] = (int(crit.size), len(self._core[1]))
+        return self._core
+
+    def solve(self, z: np.ndarray):
+        """(chain, None) with boundary(chain) = z for a cycle z, or (None, y): y over the
+        critical-row bits, orthogonal to every pattern, odd on z's forms."""
+        x, rhs = self._forward(z)
+        resid = rhs[self.crit].astype(bool)
+        if not resid.any():
+            return np.nonzero(x)[0], None
+        phi, patterns, reps = self.core()
+        target = 0
+        for k in np.nonzero(resid)[0].tolist():
+            target |= 1 << k
+        subset, y = gf2.solve(patterns, target)
+        if subset is None:
+            return None, y
+        fixed = np.asarray(reps[subset], dtype=_I64)
+        self.stats["fixed_critical"] = int(fixed.size)
+        return np.nonzero(_replay(self.cx, z, self.tree, self.rounds, fixed))[0], None
+
+    def closure(self, z_raw: np.ndarray, odd: np.ndarray, zone: np.ndarray):
+        """(f, None): zone edges f with z_raw + f a boundary; or (None, psi): a cocycle
+        (edge mask) missing the zone with |psi & z_raw| odd.
+
+        Columns: the critical triangles' patterns (vertex part 0), and per zone edge its
+        forms plus one bit for each end (vertex bits above the critical rows, over the
+        zone's vertices only). Target: z_raw's forms plus its odd vertices.
+        """
+        cx = self.cx
+        phi, patterns, _ = self.core()
+        nc = self.crit.size
+        u, v = cx.edges[:, 0], cx.edges[:, 1]
+        zv = np.unique(np.concatenate([odd, u[zone], v[zone]]))
+        vbit = np.full(cx.n, -1, dtype=_I64)
+        vbit[zv] = nc + np.arange(zv.size, dtype=_I64)
+        cols = list(patterns)
+        k0 = len(cols)
+        for e, a, b in zip(zone.tolist(), vbit[u[zone]].tolist(), vbit[v[zone]].tolist()):
+            cols.append(_to_int(phi[e]) | (1 << a) | (1 << b))
+        target = _to_int(np.bitwise_xor.reduce(phi[z_raw], axis=0)) if z_raw.any() else 0
+        for a in vbit[odd].tolist():
+            target ^= 1 << a
+        subset, y = gf2.solve(cols, target)
+        if subset is not None:
+            f = np.zeros(cx.n_edges, dtype=bool)
+            f[zone[[i - k0 for i in subset if i >= k0]]] = True
+            return f, None
+        g = np.zeros(cx.n, dtype=bool)
+        g[zv[gf2.bits(y >> nc)]] = True
+        return None, self.cocycle(y & ((1 << nc) - 1)) ^ (g[u] != g[v])
+
+    def cocycle(self, y: int) -> np.ndarray:
+        """The edge mask of sum_k y_k phi_k."""
+        phi = self.core()[0]
+        W = phi.shape[1]
+        ybits = np.array([(y >> (64 * w)) & 0xFFFFFFFFFFFFFFFF for w in range(W)], dtype=np.uint64)
+        return (np.bitwise_count(phi & ybits).sum(axis=1) & 1).astype(bool)
 
 
 # ----------------------------------------------------------------------------- main
 def certify(cx: Complex, fence, *, seed: int | None = None) -> Certificate:
-    """Find a 2-chain c with boundary(c) = z over GF(2), or an obstruction.
+    """Decide the criterion of the module docstring: a chain alpha and a closure f in the
+    zone with boundary(alpha) = z_raw + f, or an obstruction.
 
-    fence: a Fence (its one-sided edges ``z`` are used), a bool edge mask, edge ids, or
-    (k, 2) node-id pairs. seed: optional local vertex index to start the BFS from.
-
-    A Fence whose raw one-sided edges had odd vertices (crossing edges, e.g. around a
-    pillar) was closed into a cycle by a shortest T-join (``Fence.z_repair``). If that
-    closure is not a boundary, every other closure through edges within one hop of the
-    odd vertices is tried at once (one GF(2) elimination); the certificate's ``z`` is then
-    the closure found and ``stats["slack_closure"]`` its number of added edges.
+    fence: a Fence (its one-sided edges ``z_raw`` are the target, with a closure zone
+    when they leave odd vertices), or an explicit target without closure: a bool edge
+    mask, edge ids or (k, 2) node-id pairs (ValueError when empty or repeated). A Fence
+    with no one-sided edge is refused (stats["reason"] = "empty target").
+    seed: optional local vertex index to start the BFS from.
     """
-    E, T, n = cx.n_edges, cx.n_triangles, cx.n
-    z = _as_edge_mask(cx, fence)
-    z_ids = np.nonzero(z)[0]
-    empty_e = np.zeros(0, dtype=_I64)
-    stats: dict[str, Any] = {"edges": E, "triangles": T, "z": int(z_ids.size)}
+    E, T = cx.n_edges, cx.n_triangles
+    zr, closable = _target(cx, fence, "certify")
+    stats: dict[str, Any] = {"edges": E, "triangles": T, "z": int(zr.sum())}
 
-    def _result(ok, chain, ob, hole, odd):
-        chain = np.sort(np.asarray(chain, dtype=_I64))
-        hole = np.asarray(hole, dtype=_I64)
-        chain_nodes = cx.ids[cx.triangles[chain]] if chain.size else np.zeros((0, 3), _I64)
-        support = _support(cx, chain)
-        return Certificate(
-            certified=ok,
-            z=z_ids,
-            chain=chain,
-            obstruction=np.sort(np.asarray(ob, dtype=_I64)),
-            hole_edges=hole,
-            odd_vertices=np.asarray(odd, dtype=_I64),
-            chain_nodes=chain_nodes,
-            hole_edge_nodes=cx.ids[cx.edges[hole]] if hole.size else np.zeros((0, 2), _I64),
-            support=support,
-            stats=stats,
-        )
+    def result(ok, z, chain=_EMPTY, ob=_EMPTY, hole=_EMPTY, closure=_EMPTY):
+        return _make(cx, ok, z, chain, ob, hole, cx.ids[odd], stats, zr, closure, closable)
 
-    # 1. z must be a cycle
-    if z_ids.size:
-        deg = np.bincount(cx.edges[z_ids].ravel(), minlength=n) & 1
-        odd = np.nonzero(deg)[0]
+    if not zr.any():
+        odd = _EMPTY
+        stats["reason"] = "empty target: no one-sided fence edge"
+        return result(False, zr)
+    odd, zone = closure_zone(cx, zr) if closable else (_EMPTY, _EMPTY)
+    if not closable:  # an explicit target: its odd vertices refuse it at once
+        odd = np.nonzero(np.bincount(cx.edges[zr].ravel(), minlength=cx.n) & 1)[0]
         if odd.size:
             star = np.nonzero(np.any(cx.edges == odd[0], axis=1))[0]
-            hole = z_ids[np.any(np.isin(cx.edges[z_ids], odd), axis=1)]
-            stats["reason"] = "z is not a cycle"
-            return _result(False, [], star, hole, cx.ids[odd])
-    else:
-        return _result(True, [], empty_e, empty_e, empty_e)
+            stats["reason"] = "the target is not a cycle"
+            return result(False, zr, ob=star, hole=np.nonzero(zr & np.isin(cx.edges, odd).any(1))[0])
 
-    # 2-3. forest, Morse matching
-    rank, tree = _vertex_forest(cx, seed)
-    match, crit = _lower_star_matching(cx, rank, tree)
-    stats["critical_rows"] = int(crit.size)
-    stats["matched"] = int((match >= 0).sum())
+    S = _Solver(cx, seed, stats)
+    if odd.size == 0:
+        chain, y = S.solve(zr)
+        if chain is not None:
+            _check(cx, chain, zr)
+            return result(True, zr, chain)
+        stats["reason"] = "the target is not a boundary"
+        ob = np.nonzero(S.cocycle(y))[0]
+        hole = np.nonzero(_flow_witness(cx, zr))[0]
+        return _guard(cx, result(False, zr, ob=ob, hole=hole))
 
-    # 4. triangular solve with critical columns at 0
-    x, rhs, rounds = _forward(cx, z, tree, match)
-    stats["rounds"] = len(rounds)
-    resid = rhs[crit].astype(bool)
-    if not resid.any():
-        return _result(True, np.nonzero(x)[0], empty_e, empty_e, empty_e)
+    # odd vertices (edges cross, e.g. around pillars): close z_raw inside the zone
+    hint = getattr(fence, "z_repair", None)
+    in_zone = np.zeros(E, dtype=bool)
+    in_zone[zone] = True
+    if hint is not None and len(hint) and np.all(in_zone[np.asarray(hint, dtype=_I64)]):
+        z1 = zr.copy()
+        z1[np.asarray(hint, dtype=_I64)] ^= True
+        if not (np.bincount(cx.edges[z1].ravel(), minlength=cx.n) & 1).any():
+            chain, _ = S.solve(z1)
+            if chain is not None:
+                _check(cx, chain, z1)
+                stats["closure"] = int(len(hint))
+                return result(True, z1, chain, closure=np.asarray(hint, dtype=_I64))
+    f, psi = S.closure(zr, odd, zone)
+    if f is not None:
+        z2 = zr | f
+        chain, _ = S.solve(z2)
+        if chain is None:  # pragma: no cover - the closure search guarantees a boundary
+            raise AssertionError("closure search produced a non-boundary")
+        _check(cx, chain, z2)
+        stats["closure"] = int(f.sum())
+        return result(True, z2, chain, closure=np.nonzero(f)[0])
+    stats["reason"] = "no closure of the target in its zone is a boundary"
+    hole = np.nonzero(zr & np.isin(cx.edges, odd).any(1))[0]
+    return _guard(cx, result(False, zr, ob=np.nonzero(psi)[0], hole=hole))
 
-    # Schur complement on the critical rows
-    W = (crit.size + 63) // 64
-    phi = _transpose_forms(cx, tree, crit, rounds, W)
-    is_matched_col = np.zeros(T, dtype=bool)
-    is_matched_col[match[match >= 0]] = True
-    ccols = np.nonzero(~is_matched_col)[0]
-    S = phi[cx.tri_edges[ccols, 0]] ^ phi[cx.tri_edges[ccols, 1]] ^ phi[cx.tri_edges[ccols, 2]]
-    nz = np.any(S != 0, axis=1)
-    ccols, S = ccols[nz], S[nz]
-    if S.shape[0]:
-        if W == 1:
-            u1, first = np.unique(S[:, 0], return_index=True)
-            uniq = u1[:, None]
-        else:
-            uniq, first = np.unique(S, axis=0, return_index=True)
-        reps = ccols[first]
-    else:
-        uniq, reps = S, ccols
-    patterns = [_to_int(row) for row in uniq]
-    kk = np.nonzero(resid)[0]
-    target = 0
-    for k in kk.tolist():
-        target |= 1 << k
-    stats["core"] = (int(crit.size), len(patterns))
-    subset, y = _solve_patterns(patterns, target)
-    if subset is not None:
-        fixed = np.asarray(reps[subset], dtype=_I64)
-        x = _replay(cx, z, tree, rounds, fixed)
-        stats["fixed_critical"] = int(fixed.size)
-        chain = np.nonzero(x)[0]
-        if not np.array_equal(boundary_of(cx, chain), z):  # pragma: no cover - internal bug guard
-            raise AssertionError("certificate solver produced a wrong chain")
-        return _result(True, chain, empty_e, empty_e, empty_e)
 
-    # 4b. a fence repaired into a cycle (odd vertices where edges cross) may have been
-    # closed the wrong way round: search every closure near the odd vertices at once
-    z2 = _slack_closure(cx, fence, phi, crit.size, patterns)
-    if z2 is not None:
-        cert2 = certify(cx, z2, seed=seed)
-        if cert2.certified:
-            stats.update(cert2.stats)
-            stats["slack_closure"] = int(np.count_nonzero(z2)) - len(fence.z_raw)  # f is outside z_raw
-            return certificate_from_chain(cx, cert2.z, cert2.chain, stats)
+def _check(cx: Complex, chain: np.ndarray, z: np.ndarray) -> None:
+    if chain.size == 0 or not np.array_equal(boundary_of(cx, chain), z):  # pragma: no cover
+        raise AssertionError("certificate solver produced a wrong chain")
 
-    # 5. obstruction: phi . y
-    ybits = np.zeros(W, dtype=np.uint64)
-    for w in range(W):
-        ybits[w] = np.uint64((y >> (64 * w)) & 0xFFFFFFFFFFFFFFFF)
-    par = np.bitwise_count(phi & ybits).sum(axis=1) & 1
-    ob = np.nonzero(par)[0]
-    hole = np.nonzero(_flow_witness(cx, z))[0]
-    stats["reason"] = "z is not a boundary"
-    cert = _result(False, [], ob, hole, empty_e)
+
+def _guard(cx: Complex, cert: Certificate) -> Certificate:
     if not verify_certificate(cx, cert):  # pragma: no cover - internal bug guard
         raise AssertionError("certificate solver produced a wrong obstruction")
     return cert

@@ -41,14 +41,59 @@ class RobotReport:
     touch_bearing: float | None = None
 
 
-def as_report(r: Any) -> RobotReport:
+def _node_ids(keys, where: str) -> list[int]:
+    """Node ids from mapping keys: all ints (Python or numpy) or all decimal strings, none
+    negative, no two naming the same robot; ValueError naming the problem otherwise."""
+    keys = list(keys)
+    if all(type(k) is int for k in keys):  # the common case: plain ints, one per robot
+        if keys and min(keys) < 0:
+            raise ValueError(f"{where}: negative robot ids {[k for k in keys if k < 0][:5]} (ids must be >= 0)")
+        if len(set(keys)) != len(keys):
+            raise ValueError(f"{where}: robot ids repeat: {keys}")
+        return keys
+    kinds = set()
+    out = []
+    for k in keys:
+        if isinstance(k, (bool, np.bool_)):
+            raise ValueError(f"{where}: robot id {k!r} is a bool, not an int")
+        if isinstance(k, (int, np.integer)):
+            kinds.add("int")
+            out.append(int(k))
+        elif isinstance(k, str) and k.strip().lstrip("+-").isdigit():
+            kinds.add("str")
+            out.append(int(k))
+        else:
+            raise ValueError(f"{where}: robot id {k!r} ({type(k).__name__}) is not an integer id")
+    if len(kinds) > 1:
+        ints = {int(k) for k in keys if not isinstance(k, str)}
+        same = [k for k in keys if isinstance(k, str) and int(k) in ints]
+        raise ValueError(f"{where}: robot ids mix ints and strings"
+                         + (f" ({same[0]!r} and {int(same[0])} would collapse)" if same else "")
+                         + "; use one key type")
+    neg = [k for k, i in zip(keys, out) if i < 0]
+    if neg:
+        raise ValueError(f"{where}: negative robot ids {neg[:5]} (ids must be >= 0)")
+    if len(set(out)) != len(out):
+        seen, dup = set(), []
+        for k, i in zip(keys, out):
+            if i in seen:
+                dup.append(k)
+            seen.add(i)
+        raise ValueError(f"{where}: robot ids {dup[:5]} name the same robot as another key")
+    return out
+
+
+def as_report(r: Any, where: str = "report") -> RobotReport:
     """Accept a :class:`RobotReport` or a plain dict.
 
     Dict forms: ``{"neighbours": {id: bearing}, "touch": bool, "touch_bearing": rad}``
     or ``{"neighbours": [ids], "bearings": [rad], ...}`` (``neighbors`` also accepted).
     """
     if isinstance(r, RobotReport):
-        return r
+        nids = _node_ids(r.neighbours.keys(), f"{where}: neighbours")
+        if all(type(k) is int for k in r.neighbours):
+            return r
+        return RobotReport(dict(zip(nids, r.neighbours.values())), r.touch, r.touch_bearing)
     if not isinstance(r, Mapping):
         raise TypeError(f"cannot read a robot report from {type(r).__name__}")
     nb = r.get("neighbours", r.get("neighbors", {}))
@@ -57,10 +102,13 @@ def as_report(r: Any) -> RobotReport:
         br = list(r.get("bearings", ()))
         if len(br) != len(ids):
             raise ValueError("neighbour ids and bearings differ in length")
+        if len(set(map(repr, ids))) != len(ids):
+            raise ValueError(f"{where}: neighbour ids repeat: {ids}")
         nb = dict(zip(ids, br))
     tb = r.get("touch_bearing")
+    nids = _node_ids(nb.keys(), f"{where}: neighbours")
     return RobotReport(
-        neighbours={int(k): float(v) for k, v in nb.items()},
+        neighbours=dict(zip(nids, (float(v) for v in nb.values()))),
         touch=bool(r.get("touch", False)),
         touch_bearing=None if tb is None else float(tb),
     )
@@ -299,7 +347,8 @@ def build_complex(reports: Mapping[int, Any]) -> Complex:
     Keeps {i, j} only when i lists j and j lists i; neighbour ids without a report are
     ignored. Triangles are all 3-cliques. Bearings of both directions are stored.
     """
-    reps = {int(k): as_report(r) for k, r in reports.items()}
+    ids_in = _node_ids(reports.keys(), "build_complex")
+    reps = {i: as_report(r, f"build_complex: report of robot {k!r}") for i, (k, r) in zip(ids_in, reports.items())}
     ids = np.array(sorted(reps), dtype=_I64)
     n = ids.shape[0]
     src_l: list[int] = []
@@ -354,7 +403,9 @@ def add_robot(cx: Complex, reports: Mapping[int, Any], node_id: int) -> Complex:
     node_id = int(node_id)
     if node_id in cx:
         raise ValueError(f"node {node_id} already in the complex")
-    r = as_report(reports[node_id])
+    if node_id < 0:
+        raise ValueError(f"add_robot: negative robot id {node_id} (ids must be >= 0)")
+    r = as_report(reports[node_id], f"add_robot: report of robot {node_id}")
     n_old = cx.n
     p = int(np.searchsorted(cx.ids, node_id))
     ids = np.insert(cx.ids, p, node_id)
@@ -369,7 +420,7 @@ def add_robot(cx: Complex, reports: Mapping[int, Any], node_id: int) -> Complex:
         rj = reports.get(j)
         if rj is None:
             continue
-        rj = as_report(rj)
+        rj = as_report(rj, f"add_robot: report of robot {j}")
         back = rj.neighbours.get(node_id)
         if back is None:
             continue

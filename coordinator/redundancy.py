@@ -19,6 +19,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from .certificate import Certificate, certificate_from_chain, certify
 from .complex import Complex
+from .gf2 import Basis, solve
 
 __all__ = ["Redundancy", "find_redundant", "link_is_acyclic"]
 
@@ -76,27 +77,18 @@ def _betti01(L: dict[int, set]) -> tuple[int, int]:
     cyc = ne - len(verts) + b0
     if cyc == 0:
         return b0, 0
-    # rank of the triangle -> edge boundary map
-    basis: dict[int, int] = {}
+    # rank of the triangle -> edge boundary map, counted until it reaches cyc
+    B = Basis()
     rank = 0
     for a in verts:
         for b in L[a]:
             if b <= a:
                 continue
             for e in L[a] & L[b]:
-                if e <= b:
-                    continue
-                p = (1 << edges[(a, b)]) | (1 << edges[(a, e)]) | (1 << edges[(b, e)])
-                while p:
-                    hb = p.bit_length() - 1
-                    q = basis.get(hb)
-                    if q is None:
-                        basis[hb] = p
-                        rank += 1
-                        break
-                    p ^= q
-                if rank == cyc:
-                    return b0, 0
+                if e > b and B.add((1 << edges[(a, b)]) | (1 << edges[(a, e)]) | (1 << edges[(b, e)])):
+                    rank += 1
+                    if rank == cyc:
+                        return b0, 0
     return b0, cyc - rank
 
 
@@ -167,30 +159,11 @@ def _fill_cycle(L: dict[int, set], gamma: set[tuple[int, int]]) -> list[tuple[in
             for e in L[a] & L[b]:
                 if e > b:
                     tris.append((a, b, e))
-    basis: dict[int, tuple[int, int]] = {}
-    for i, (a, b, e) in enumerate(tris):
-        p = (1 << edges[(a, b)]) | (1 << edges[(a, e)]) | (1 << edges[(b, e)])
-        comb = 1 << i
-        while p:
-            hb = p.bit_length() - 1
-            q = basis.get(hb)
-            if q is None:
-                basis[hb] = (p, comb)
-                break
-            p ^= q[0]
-            comb ^= q[1]
     r = 0
     for ab in gamma:
         r ^= 1 << edges[ab]
-    comb = 0
-    while r:
-        hb = r.bit_length() - 1
-        q = basis.get(hb)
-        if q is None:
-            return None
-        r ^= q[0]
-        comb ^= q[1]
-    return [tris[i] for i in range(len(tris)) if (comb >> i) & 1]
+    subset, _ = solve([(1 << edges[(a, b)]) | (1 << edges[(a, e)]) | (1 << edges[(b, e)]) for a, b, e in tris], r)
+    return None if subset is None else [tris[i] for i in subset]
 
 
 def find_redundant(
@@ -302,5 +275,6 @@ def find_redundant(
                 heapq.heappush(heap, (keys[a], a))
         nbr[c] = set()
     chain = np.nonzero(x)[0]
-    cert = certificate_from_chain(cx, z, chain, {"rerouted_from": int(certificate.chain.size)})
+    cert = certificate_from_chain(cx, z, chain, {"rerouted_from": int(certificate.chain.size)},
+                                  like=certificate)
     return Redundancy(tuple(int(cx.ids[p]) for p in removed), cert, tried)

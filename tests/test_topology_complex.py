@@ -5,6 +5,7 @@ import itertools
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings, strategies as st
 
 from coordinator import RobotReport, add_robot, build_complex, remove_robot
@@ -76,3 +77,33 @@ def test_incremental_update_equals_rebuild(rng, n, k):
         assert a.triangles.tolist() == b.triangles.tolist()
         assert np.allclose(a.bearings, b.bearings)
         assert a.touch.tolist() == b.touch.tolist()
+
+
+def test_report_ids_are_validated():
+    good = {"neighbours": {}}
+    with pytest.raises(ValueError, match=r"mix ints and strings \('1' and 1 would collapse\)"):
+        build_complex({1: good, "1": good})
+    with pytest.raises(ValueError, match="mix ints and strings"):
+        build_complex({1: good, "2": good})
+    with pytest.raises(ValueError, match=r"negative robot ids \[-3\]"):
+        build_complex({-3: good, 1: good})
+    with pytest.raises(ValueError, match="name the same robot"):
+        build_complex({"1": good, "01": good})
+    with pytest.raises(ValueError, match="not an integer id"):
+        build_complex({1.5: good})
+    with pytest.raises(ValueError, match="is a bool"):
+        build_complex({True: good})
+    # neighbour ids follow the same rules, inside the report that lists them
+    with pytest.raises(ValueError, match=r"report of robot 1: neighbours: robot ids mix"):
+        build_complex({1: {"neighbours": {2: 0.0, "2": 0.1}}, 2: good})
+    with pytest.raises(ValueError, match=r"report of robot 1: neighbours: negative robot ids"):
+        build_complex({1: {"neighbours": {-2: 0.0}}, 2: good})
+    with pytest.raises(ValueError, match="negative robot ids"):
+        build_complex({1: RobotReport({-2: 0.0})})
+    # one key type is fine, strings included (JSON)
+    cx = build_complex({"1": {"neighbours": {"2": 0.0}}, "2": {"neighbours": {"1": math.pi}}})
+    assert cx.ids.tolist() == [1, 2] and cx.n_edges == 1
+    cx = build_complex({np.int64(1): {"neighbours": {np.int64(2): 0.0}}, 2: {"neighbours": {1: math.pi}}})
+    assert cx.n_edges == 1
+    with pytest.raises(ValueError, match="negative robot id"):
+        add_robot(cx, {-1: good}, -1)

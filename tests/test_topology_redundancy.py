@@ -110,3 +110,28 @@ def test_not_certified_removes_nothing():
     bad = [0]  # a single edge is not a cycle
     red = find_redundant(cx, bad)
     assert red.removed == () and not red.certificate.certified
+
+
+def test_removal_keeps_a_closed_certificate_valid_for_the_fence():
+    """pillar_hall's end state needs closure edges; the rerouted certificate keeps the
+    same target and closure and still passes verify against the Fence."""
+    import json
+    from pathlib import Path
+
+    from coordinator import TopologyParams
+
+    d = json.loads((Path(__file__).parent / "data" / "pillar_hall_end.json").read_text())
+    reps = {int(v): {"neighbours": {int(k): b for k, b in r["neighbours"].items()},
+                     "touch": r["touch"], "touch_bearing": r["touch_bearing"]}
+            for v, r in d["reports"].items()}
+    cx = build_complex(reps)
+    f = detect_fence(cx, TopologyParams(), test_drive_failures={int(k): v for k, v in d["test_drive_failures"].items()})
+    cert = certify(cx, f)
+    assert cert.certified and cert.closure.size
+    red = find_redundant(cx, f, cert)
+    assert red.removed
+    rc = red.certificate
+    assert verify_certificate(cx, rc, f)
+    assert np.array_equal(rc.z, cert.z) and np.array_equal(rc.closure, cert.closure)
+    assert np.array_equal(rc.target, cert.target) and rc.closable
+    assert not set(red.removed) & set(rc.support.tolist())
