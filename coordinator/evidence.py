@@ -107,6 +107,7 @@ class Evidence:
         self.records: list[DriveRecord] = []
         self._failed: dict[int, list[float]] = {}
         self._probes: set[ProbeKey] = set()
+        self._approach_fails: dict[ProbeKey, int] = {}
 
     # ---------------------------------------------------------------- recording
     def record(self, dep, touched: bool, *, direction: float | None = None) -> DriveRecord:
@@ -127,6 +128,20 @@ class Evidence:
                 self.add_failed_direction(rec.vertex, d)
         return rec
 
+    def record_unreached(self, dep) -> int:
+        """An interior probe whose approach leg failed (its robot never reached the point on
+        the edge: "via (...)"). Returns how often that probe has failed so; from
+        UNREACHED_LIMIT on it is given up (``probe_unreachable``): the side may close
+        without it, and is then reported as inferred ("probe_unreachable")."""
+        frac = float(getattr(dep, "via_frac", 0.0) or 0.0)
+        if dep.edge is None or frac <= 1e-9:
+            return 0
+        k = probe_key(int(dep.vertex), tuple(int(x) for x in dep.edge), int(dep.sigma), frac)
+        self._approach_fails[k] = self._approach_fails.get(k, 0) + 1
+        return self._approach_fails[k]
+
+    UNREACHED_LIMIT = 2
+
     def add_failed_direction(self, vertex: int, direction: float) -> None:
         """A drive from ``vertex`` along ``direction`` touched (no Deployment at hand)."""
         lst = self._failed.setdefault(int(vertex), [])
@@ -144,11 +159,17 @@ class Evidence:
         return frozenset(k for k in self._probes
                          if present is None or (k[0] in present and k[1] in present))
 
+    def unreachable_probes(self, present: Container[int] | None = None) -> frozenset[ProbeKey]:
+        """Keys of interior probes whose approach failed UNREACHED_LIMIT times."""
+        return frozenset(k for k, n in self._approach_fails.items() if n >= self.UNREACHED_LIMIT
+                         and (present is None or (k[0] in present and k[1] in present)))
+
     def fence_kwargs(self, present: Container[int] | None = None) -> dict:
-        """Keyword arguments for detect_fence: test_drive_failures, probe_failures and
-        probe_fracs (restricted to nodes in ``present`` when given)."""
+        """Keyword arguments for detect_fence: test_drive_failures, probe_failures,
+        probe_unreachable and probe_fracs (restricted to nodes in ``present`` when given)."""
         return dict(test_drive_failures=self.failed_directions(present),
                     probe_failures=self.failed_probes(present),
+                    probe_unreachable=self.unreachable_probes(present),
                     probe_fracs=self.fractions)
 
     def merge_failures(self, failures: Mapping[int, list[float]]) -> None:

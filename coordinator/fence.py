@@ -365,6 +365,7 @@ def detect_fence(
     default_bearing: float | Mapping[int, float] = 0.0,
     probe_failures=(),
     probe_fracs=None,
+    probe_unreachable=(),
 ) -> Fence:
     """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
 
@@ -523,6 +524,7 @@ def detect_fence(
     # contact within _FAILED_CONE of the perpendicular) and the interior probes (by key).
     fracs = tuple(probe_fracs) if probe_fracs is not None else probe_fractions()
     pfail = {(int(a), int(b), int(c), round(float(d), 3)) for a, b, c, d in probe_failures}
+    punreach = {(int(a), int(b), int(c), round(float(d), 3)) for a, b, c, d in probe_unreachable}
     d0_rv, dtd_rv = P.d0 / P.rv, P.d_td / P.rv
 
     def _end_probed(p: int, perp: float) -> bool:
@@ -541,6 +543,7 @@ def detect_fence(
         pv = wrap(L.bearings(v)[u] - sg * math.pi / 2.0)
         todo: list[Deployment] = []
         inner: list[Deployment] = []
+        skipped = False
         for g in fracs:
             if g <= 1e-9:
                 if not _end_probed(u, pu):
@@ -550,6 +553,8 @@ def detect_fence(
                 if not _end_probed(v, pv):
                     todo.append(Deployment(iv, pv, (iu, iv), sg, -sg * math.pi / 2.0,
                                            L.clearance(v, pv), "probe", 0.0, dtd_rv))
+            elif (iu, iv, sg, round(g, 3)) in punreach and (iu, iv, sg, round(g, 3)) not in pfail:
+                skipped = True
             elif (iu, iv, sg, round(g, 3)) not in pfail:
                 depth = probe_depth_rv(g, d0_rv, dtd_rv)
                 # either end can drive it; the nearer one first
@@ -562,7 +567,7 @@ def detect_fence(
         if todo:
             probing[(e, sg)] = todo
         else:
-            marks[(e, sg)] = "probes"
+            marks[(e, sg)] = "probe_unreachable" if skipped else "probes"
 
     for pair in forced_obstacle:
         a, b = (int(x) for x in pair)
