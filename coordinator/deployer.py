@@ -780,7 +780,7 @@ class Deployer:
             self._record(spec, touched=True)
             log.info("cycle %d: test drive from vertex %d touched an obstacle: fence side "
                      "of %s -> O", self.cycle, spec.path[-1], spec.frontier_edge)
-            if td.reason == "touch" and self._retry(job):
+            if td.reason == "touch" and not spec.free and self._retry(job):
                 return
         self._cancel(job, "test drive touched an obstacle")
 
