@@ -801,7 +801,8 @@ class Deployer:
         order), avoids this cycle's other pushes and every robot no longer where the
         snapshot has it. False when retries are used up or nothing is left to push to."""
         probe = job.spec.kind == "probe"
-        if (not probe and job.retries >= self.cfg.td_retries) or job.retries >= _PROBE_RETRIES:
+        if (self.cfg.td_retries == 0 or (not probe and job.retries >= self.cfg.td_retries)
+                or job.retries >= _PROBE_RETRIES):
             # a probe that touched moved nothing: the next one goes at once (up to a bound)
             return False
         snap = self.snapshot
