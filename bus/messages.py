@@ -69,20 +69,22 @@ def f_float(lo: float = -1e9, hi: float = 1e9, default: float = 0.0, optional: b
                                              "optional": optional})
 
 
-def f_int(lo: int = -(2**62), hi: int = 2**62, default: int = 0):
+def f_int(lo: int = -(2**62), hi: int = 2**62, default: int = 0, optional: bool = False):
     return field(default=default, metadata={"check": lambda v: _check_int(v, lo, hi),
-                                             "kind": "int", "lo": lo, "hi": hi})
+                                             "kind": "int", "lo": lo, "hi": hi,
+                                             "optional": optional})
 
 
-def f_bool(default: bool = False):
+def f_bool(default: bool = False, optional: bool = False):
     def check(v):
         if not isinstance(v, bool):
             raise ValueError(f"expected a bool, got {type(v).__name__}")
         return v
-    return field(default=default, metadata={"check": check, "kind": "bool"})
+    return field(default=default, metadata={"check": check, "kind": "bool", "optional": optional})
 
 
-def f_str(choices: tuple[str, ...] | None = None, maxlen: int = _MAX_STR, default: str = ""):
+def f_str(choices: tuple[str, ...] | None = None, maxlen: int = _MAX_STR, default: str = "",
+          optional: bool = False):
     def check(v):
         if not isinstance(v, str):
             raise ValueError(f"expected a string, got {type(v).__name__}")
@@ -92,7 +94,7 @@ def f_str(choices: tuple[str, ...] | None = None, maxlen: int = _MAX_STR, defaul
             raise ValueError(f"{v!r} not one of {', '.join(choices)}")
         return v
     return field(default=default, metadata={"check": check, "kind": "str", "choices": choices,
-                                            "maxlen": maxlen})
+                                            "maxlen": maxlen, "optional": optional})
 
 
 def _list(v: Any) -> list:
@@ -103,7 +105,7 @@ def _list(v: Any) -> list:
     return list(v)
 
 
-def f_floats(lo: float = -1e9, hi: float = 1e9):
+def f_floats(lo: float = -1e9, hi: float = 1e9, optional: bool = False):
     def check(v):
         out = _list(v)
         for k, x in enumerate(out):
@@ -113,10 +115,10 @@ def f_floats(lo: float = -1e9, hi: float = 1e9):
                 raise ValueError(f"[{k}]: {e}") from None
         return out
     return field(default_factory=list, metadata={"check": check, "kind": "floats", "lo": lo,
-                                                 "hi": hi})
+                                                 "hi": hi, "optional": optional})
 
 
-def f_ints(lo: int = -(2**62), hi: int = 2**62):
+def f_ints(lo: int = -(2**62), hi: int = 2**62, optional: bool = False):
     def check(v):
         out = _list(v)
         for k, x in enumerate(out):
@@ -126,17 +128,31 @@ def f_ints(lo: int = -(2**62), hi: int = 2**62):
                 raise ValueError(f"[{k}]: {e}") from None
         return out
     return field(default_factory=list, metadata={"check": check, "kind": "ints", "lo": lo,
-                                                 "hi": hi})
+                                                 "hi": hi, "optional": optional})
 
 
-def f_bools():
+def f_bools(optional: bool = False):
     def check(v):
         out = _list(v)
         for k, x in enumerate(out):
             if not isinstance(x, bool):
                 raise ValueError(f"[{k}]: expected a bool, got {type(x).__name__}")
         return out
-    return field(default_factory=list, metadata={"check": check, "kind": "bools"})
+    return field(default_factory=list, metadata={"check": check, "kind": "bools",
+                                                 "optional": optional})
+
+
+def f_strs(maxlen: int = _MAX_STR, optional: bool = False):
+    def check(v):
+        out = _list(v)
+        for k, x in enumerate(out):
+            if not isinstance(x, str):
+                raise ValueError(f"[{k}]: expected a string, got {type(x).__name__}")
+            if len(x) > maxlen:
+                raise ValueError(f"[{k}]: longer than {maxlen} characters")
+        return out
+    return field(default_factory=list, metadata={"check": check, "kind": "strs",
+                                                 "maxlen": maxlen, "optional": optional})
 
 
 def f_polys(lo: float = -1e6, hi: float = 1e6):
@@ -367,7 +383,7 @@ class Status(Message):
 TASK_KINDS = ("hold", "goto", "deploy", "test_drive", "leave")
 
 
-@message("Task", same_len=(("landmarks", "bearings"),))
+@message("Task", same_len=(("landmarks", "bearings"), ("via_landmarks", "via_bearings")))
 class Task(Message):
     """Coordinator -> agent: what to do next. A new task replaces the current one.
 
@@ -383,6 +399,13 @@ class Task(Message):
     leave: stop and idle (redundant robot).
     ref_offsets: per landmark, heading of the reference frame minus the landmark's heading
       (rad), for frame alignment (spec 4.7); [] means frames are parallel (psi = 0).
+    via_landmarks / via_bearings (test_drive only; default empty = no approach leg): a
+      probe (coordinator.evidence) first homes to the point where it sees each via landmark
+      (robot ids, a subset of ``landmarks`` so ``ref_offsets`` align them) at its via
+      bearing (rad, reference frame); with one via landmark it drives open loop along that
+      bearing for ``via_distance`` (m) instead. Then it drives along ``direction``. A touch
+      on the way out sends it back to ``bearings`` as usual; an approach that fails sends it
+      back and fails with reason "via (<why>)".
     """
     task_id: int = f_int(0)
     robot: int = f_int(0)
@@ -398,13 +421,16 @@ class Task(Message):
     timeout_s: float = f_float(0.0, 1e6, default=60.0)
     keep_after: float = f_float(0.0, 1e4)  # test_drive: a touch beyond this (m) ends it "done
                                            # (wall)" with the robot kept there; 0 = never
+    via_landmarks: list = f_ints(0, optional=True)
+    via_bearings: list = f_floats(**ANGLE, optional=True)
+    via_distance: float = f_float(0.0, 1e4, optional=True)
 
     def _post_check(self):
         if self.ref_offsets and len(self.ref_offsets) != len(self.landmarks):
             raise WireError(self.TAG, "ref_offsets", "must be [] or one per landmark")
 
 
-@message("Complex")
+@message("Complex", same_len=(("inferred", "inferred_why"),))
 class Complex(Message):
     """Coordinator -> viewers/recorders, once per deployment cycle.
 
@@ -414,6 +440,9 @@ class Complex(Message):
     state: "running", "certified" (K empty and certificate holds) or "stopped".
     failures_healed: robot failures whose holes this coordinator has refilled so far;
     reason: why it stopped (state "stopped"), e.g. "robots_max = 40 reached".
+    inferred / inferred_why: obstacle edges (indices into the edge list) closed by
+      inference rather than by probes, and how ("convex_corner", "forced"); empty by
+      default.
     """
     cycle: int = f_int(0)
     t: float = f_float(0.0)
@@ -429,8 +458,10 @@ class Complex(Message):
     certified: bool = f_bool()
     robots: int = f_int(0)
     state: str = f_str(("running", "certified", "stopped"), default="running")
-    failures_healed: int = f_int(0)
-    reason: str = f_str(maxlen=200)
+    failures_healed: int = f_int(0, optional=True)
+    reason: str = f_str(maxlen=200, optional=True)
+    inferred: list = f_ints(0, optional=True)
+    inferred_why: list = f_strs(maxlen=40, optional=True)
 
     def _post_check(self):
         if len(self.vertices) != len(self.occupants):
@@ -440,7 +471,7 @@ class Complex(Message):
         if len(self.triangles) % 3:
             raise WireError(self.TAG, "triangles", "length not a multiple of 3")
         m = len(self.edges) // 2
-        for name in ("frontier", "obstacle"):
+        for name in ("frontier", "obstacle", "inferred"):
             bad = [e for e in getattr(self, name) if e >= m]
             if bad:
                 raise WireError(self.TAG, name, f"edge index {bad[0]} >= {m} edges")

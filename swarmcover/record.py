@@ -113,7 +113,8 @@ def schema_for(cls: type[m.Message]) -> dict:
     doc = " ".join((cls.__doc__ or "").split())
     out = {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": cls.TAG,
            "description": doc, "type": "object", "properties": props,
-           "required": list(props), "additionalProperties": False}
+           "required": [k for k in props if not (k in cls._META and cls._META[k].get("optional"))],
+           "additionalProperties": False}
     if cls._SAME_LEN:
         out["x-same-length"] = [list(g) for g in cls._SAME_LEN]
     return out
