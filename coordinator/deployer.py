@@ -863,6 +863,10 @@ class Deployer:
                     distance=td_length(spec, self.params),
                     keep_after=self.cfg.wall_keep_rv * self.cfg.rv,
                     timeout_s=self.cfg.task_timeout_s)
+        if spec.kind == "probe":
+            # a probe's touch anywhere within its depth is evidence (the ends' disks cover
+            # the way there): it goes home rather than stay against the wall (keep_after 0)
+            task.keep_after = 0.0
         if spec.via_frac > 0:
             # a probe: first to the point at via_frac of the edge, on landmarks that stay
             # put (the push's movers wait for the test drive)
