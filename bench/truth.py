@@ -14,8 +14,8 @@ along the deployment bearing; if its disk (radius r) touches a wall within wall_
 0.45 rv of the start it is a failed test drive (fed back to the fence), a touch farther out
 leaves it at the wall as a new robot (touch flag and contact bearing), a clear drive places
 a new robot at d0. A probe (kind "probe", when the fence offers it) first moves
-``via_frac`` along its edge, then drives ``depth_rv`` rv: a touch is a failure, a clear
-drive a new robot. The loop runs until the fence has no deployment left (a fixed point) or
+``via_frac`` along its edge toward the other end, then drives ``depth_rv`` rv along its
+bearing, with the same outcomes (coordinator.fence's Deployment docstring). The loop runs until the fence has no deployment left (a fixed point) or
 a robot cap; ``coordinator.certify`` then says certified or not.
 
 The oracle judges the end state:
@@ -329,11 +329,9 @@ def execute(sw: Swarm, dep) -> Outcome:
         q = sw.pos[b if a == i else a]
         start = p + float(dep.via_frac) * (q - p)
         depth = float(dep.depth_rv) * RV
-        trav, end, cdir = sw.drive(start, wdir, depth)
-        if cdir is not None:
-            return Outcome(i, float(dep.bearing), kind, "touch", trav, None, dep)
-        return Outcome(i, float(dep.bearing), kind, "clear", trav, sw.add(end), dep)
-    trav, end, cdir = sw.drive(p, wdir, D0)
+    else:
+        start, depth = p, D0
+    trav, end, cdir = sw.drive(start, wdir, depth)
     if cdir is None:
         return Outcome(i, float(dep.bearing), kind, "clear", trav, sw.add(end), dep)
     if trav < WALL_KEEP:
@@ -349,7 +347,7 @@ class Feedback:
     def __init__(self):
         try:
             from coordinator import evidence as ev  # noqa: F401
-            self._ev = ev.Evidence()
+            self._ev = ev.Evidence(robot_radius_rv=RADIUS / RV)
         except Exception:
             self._ev = None
         self.failures: dict[int, list[float]] = {}
@@ -360,7 +358,7 @@ class Feedback:
 
     def record(self, o: Outcome) -> None:
         if self._ev is not None:
-            self._ev.record(o.deployment, touched=(o.result == "touch"), travelled=o.travelled / RV)
+            self._ev.record(o.deployment, touched=(o.result == "touch"))
             return
         if o.result == "touch":
             self.failures.setdefault(o.vertex, []).append(o.direction)
