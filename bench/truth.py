@@ -15,8 +15,12 @@ along the deployment bearing; if its disk (radius r) touches a wall within wall_
 leaves it at the wall as a new robot (touch flag and contact bearing), a clear drive places
 a new robot at d0. A probe (kind "probe", when the fence offers it) first moves
 ``via_frac`` along its edge toward the other end, then drives ``depth_rv`` rv along its
-bearing, with the same outcomes (coordinator.fence's Deployment docstring). The loop runs until the fence has no deployment left (a fixed point) or
-a robot cap; ``coordinator.certify`` then says certified or not.
+bearing, with the same outcomes (coordinator.fence's Deployment docstring). Drive outcomes
+go back to the fence through ``coordinator.evidence`` when the project has it (else as
+``test_drive_failures``). The loop runs until the fence has no deployment left, or a robot
+cap; with no frontier edge either that is a fixed point, where the deployer would finish,
+and ``coordinator.certify`` says certified or not (frontier edges with no deployment left
+are "stuck": the deployer stops uncertified).
 
 The oracle judges the end state:
 
@@ -390,7 +394,9 @@ def run_map(case: MapCase, *, per_cycle: int = 3, cap: int | None = None,
         cx = build_complex(sw.reports())
         fence = detect_fence(cx, P, default_bearing=sw.body(0, case.source_dir), **fb.kwargs())
         if not fence.deployments:
-            end = "fixed"
+            # the deployer finishes only with no frontier edge either; frontier edges without
+            # a deployment end the run uncertified ("no feasible push")
+            end = "fixed" if fence.frontier.size == 0 else "stuck"
             break
         if sw.n >= cap:
             end = "cap"
@@ -489,7 +495,8 @@ def summarise(rows: list[dict]) -> dict:
     wide = [r for r in ok if r.get("door_w") is not None and r["door_w"] >= 0.4 * RV]
     return {
         "maps": len(rows), "errors": len(rows) - len(ok), "fixed_points": len(fixed),
-        "capped": sum(r["end"] != "fixed" for r in ok),
+        "capped": sum(r["end"] in ("cap", "cycles") for r in ok),
+        "stuck": sum(r["end"] == "stuck" for r in ok),
         "certified": sum(r["certified"] for r in ok),
         "false_certificates": sum(r["false_certificate"] for r in ok),
         "false_on_doors_ge_0.4": sum(r["false_certificate"] for r in wide),
@@ -511,7 +518,7 @@ def summarise(rows: list[dict]) -> dict:
 def print_table(s: dict, rows: list[dict], out=sys.stdout) -> None:
     p = lambda *a: print(*a, file=out)  # noqa: E731
     p(f"\nmaps {s['maps']} (errors {s['errors']}), fixed points {s['fixed_points']}, capped "
-      f"{s['capped']}, certified {s['certified']}, mean robots {s['robots_mean']}, fence API {s['api']}")
+      f"{s['capped']}, stuck (frontier, no deployment) {s['stuck']}, certified {s['certified']}, mean robots {s['robots_mean']}, fence API {s['api']}")
     p(f"false certificates: {s['false_certificates']} (doors >= 0.4 rv: {s['false_on_doors_ge_0.4']}; "
       f"source facing a wall: {s['false_facing_wall']}; empty target: {s['false_with_empty_target']})")
     p(f"refusals of covered end states: {s['refusals']} of {s['covered_fixed_points']} "
