@@ -85,6 +85,7 @@ class Behaviour:
         self.bumped_t = -1e18           # last time another robot touched us (s)
         self.home_mark = 0.0            # dead-reckoned advance when homing started (m)
         self.return_goal: dict[int, float] | None = None  # test drive: re-home after reversing
+        self.return_reason = "touch"    # test drive: the failure reason once back home
         self.contact_moved = 0.0
         # homing
         self.stop = StopRule(p.arrive, p.arrive_ticks, p.error_alpha)
@@ -300,7 +301,9 @@ class Behaviour:
 
     def _fail_reason(self, why: str) -> str:
         if self.task is not None and self.task.kind == "test_drive" and self.purpose == "return":
-            return f"touch (return: {why})"
+            return f"{self.return_reason} (return: {why})"
+        if self.task is not None and self.task.kind == "test_drive" and self.purpose == "via":
+            return f"via ({why})"
         return why
 
     # ------------------------------------------------------------------ task life cycle
@@ -337,14 +340,37 @@ class Behaviour:
         elif kind == "test_drive":
             self.contact_pinned = False
             self._set_state("test_driving")
-            self._enter_open(task.direction, task.distance,
-                             self.p.test_drive_speed_frac * self.p.v_max, "test")
+            self.return_reason = "touch"
+            via = {l: b for l, b in zip(task.via_landmarks, task.via_bearings) if l != self.robot}
+            if len(via) >= 2:
+                # a probe: home to the point on the edge first (bearing-only, spec 4.5)
+                self._enter_home(via, "via")
+            elif via and task.via_distance > 0:
+                self._enter_open(next(iter(via.values())), task.via_distance,
+                                 self.p.test_drive_speed_frac * self.p.v_max, "via")
+            else:
+                self._start_test_leg()
         else:  # leave
             self.vertex = -1
             self.mode = "idle"
             self._set_state("idle")
             self.progress = 1.0
             self._set_task_state("done")
+
+    def _start_test_leg(self) -> None:
+        task = self.task
+        self._enter_open(task.direction, task.distance,
+                         self.p.test_drive_speed_frac * self.p.v_max, "test")
+
+    def _via_failed(self, why: str) -> None:
+        """A probe's approach to its point on the edge failed: home back to the vertex and
+        fail with reason "via (<why>)" (no evidence either way)."""
+        self.return_reason = f"via ({why})"
+        goal = self._task_goal(self.task)
+        if goal and sum(1 for l in goal if l in self.seen) >= min(2, len(goal)):
+            self._enter_home(goal, "return")
+        else:
+            self._finish("failed", self.return_reason)
 
     def _finish(self, task_state: str, reason: str = "") -> None:
         """End the current task and hold station where the robot is."""
@@ -521,11 +547,16 @@ class Behaviour:
         elif self.purpose == "deploy":
             self._after_deploy_motion()
         elif self.purpose == "return":
-            self._finish("failed", "touch")
+            self._finish("failed", self.return_reason)
+        elif self.purpose == "via":
+            self._start_test_leg()
         else:
             self._finish("done")
 
     def _home_failed(self, why: str) -> None:
+        if self.purpose == "via":
+            self._via_failed(why)
+            return
         self._finish("failed", self._fail_reason(why))
 
     # ------------------------------------------------------------------ open loop
@@ -577,7 +608,10 @@ class Behaviour:
                 self._after_deploy_motion()
                 return 0.0, 0.0
             if self.purpose == "return":
-                self._finish("failed", "touch (return: blocked)")
+                self._finish("failed", f"{self.return_reason} (return: blocked)")
+                return 0.0, 0.0
+            if self.purpose == "via":
+                self._via_failed("blocked")
                 return 0.0, 0.0
         self.intent = d
         return ux, uy
@@ -618,7 +652,9 @@ class Behaviour:
             if goal and sum(1 for l in goal if l in self.seen) >= min(2, len(goal)):
                 self._enter_home(goal, "return")
             else:
-                self._finish("failed", "touch")
+                self._finish("failed", self.return_reason)
+        elif self.purpose == "via":
+            self._start_test_leg()
         else:  # test drive completed without a blocking touch
             self._finish("done")
 

@@ -136,6 +136,19 @@ def f_bools():
     return field(default_factory=list, metadata={"check": check, "kind": "bools"})
 
 
+def f_strs(maxlen: int = _MAX_STR):
+    def check(v):
+        out = _list(v)
+        for k, x in enumerate(out):
+            if not isinstance(x, str):
+                raise ValueError(f"[{k}]: expected a string, got {type(x).__name__}")
+            if len(x) > maxlen:
+                raise ValueError(f"[{k}]: longer than {maxlen} characters")
+        return out
+    return field(default_factory=list, metadata={"check": check, "kind": "strs",
+                                                 "maxlen": maxlen})
+
+
 def f_polys(lo: float = -1e6, hi: float = 1e6):
     """A list of polygons, each a flat list [x0, y0, x1, y1, ...] (world frame, m)."""
     def check(v):
@@ -362,7 +375,7 @@ class Status(Message):
 TASK_KINDS = ("hold", "goto", "deploy", "test_drive", "leave")
 
 
-@message("Task", same_len=(("landmarks", "bearings"),))
+@message("Task", same_len=(("landmarks", "bearings"), ("via_landmarks", "via_bearings")))
 class Task(Message):
     """Coordinator -> agent: what to do next. A new task replaces the current one.
 
@@ -378,6 +391,13 @@ class Task(Message):
     leave: stop and idle (redundant robot).
     ref_offsets: per landmark, heading of the reference frame minus the landmark's heading
       (rad), for frame alignment (spec 4.7); [] means frames are parallel (psi = 0).
+    via_landmarks / via_bearings (test_drive only; default empty = no approach leg): a
+      probe (coordinator.evidence) first homes to the point where it sees each via landmark
+      (robot ids, a subset of ``landmarks`` so ``ref_offsets`` align them) at its via
+      bearing (rad, reference frame); with one via landmark it drives open loop along that
+      bearing for ``via_distance`` (m) instead. Then it drives along ``direction``. A touch
+      on the way out sends it back to ``bearings`` as usual; an approach that fails sends it
+      back and fails with reason "via (<why>)".
     """
     task_id: int = f_int(0)
     robot: int = f_int(0)
@@ -393,13 +413,16 @@ class Task(Message):
     timeout_s: float = f_float(0.0, 1e6, default=60.0)
     keep_after: float = f_float(0.0, 1e4)  # test_drive: a touch beyond this (m) ends it "done
                                            # (wall)" with the robot kept there; 0 = never
+    via_landmarks: list = f_ints(0)
+    via_bearings: list = f_floats(**ANGLE)
+    via_distance: float = f_float(0.0, 1e4)
 
     def _post_check(self):
         if self.ref_offsets and len(self.ref_offsets) != len(self.landmarks):
             raise WireError(self.TAG, "ref_offsets", "must be [] or one per landmark")
 
 
-@message("Complex")
+@message("Complex", same_len=(("inferred", "inferred_why"),))
 class Complex(Message):
     """Coordinator -> viewers/recorders, once per deployment cycle.
 
@@ -407,6 +430,9 @@ class Complex(Message):
     edges: flat vertex-id pairs [a0, b0, a1, b1, ...]; triangles: flat triples.
     frontier/obstacle: indices into the edge list. redundant: vertex ids.
     state: "running", "certified" (K empty and certificate holds) or "stopped".
+    inferred / inferred_why: obstacle edges (indices into the edge list) closed by
+      inference rather than by probes, and how ("convex_corner", "forced"); empty by
+      default.
     """
     cycle: int = f_int(0)
     t: float = f_float(0.0)
@@ -422,6 +448,8 @@ class Complex(Message):
     certified: bool = f_bool()
     robots: int = f_int(0)
     state: str = f_str(("running", "certified", "stopped"), default="running")
+    inferred: list = f_ints(0)
+    inferred_why: list = f_strs(maxlen=40)
 
     def _post_check(self):
         if len(self.vertices) != len(self.occupants):
@@ -431,7 +459,7 @@ class Complex(Message):
         if len(self.triangles) % 3:
             raise WireError(self.TAG, "triangles", "length not a multiple of 3")
         m = len(self.edges) // 2
-        for name in ("frontier", "obstacle"):
+        for name in ("frontier", "obstacle", "inferred"):
             bad = [e for e in getattr(self, name) if e >= m]
             if bad:
                 raise WireError(self.TAG, name, f"edge index {bad[0]} >= {m} edges")

@@ -62,6 +62,13 @@ class CoordinatorConfig:
     dead_after_cycles: int = 3     # heartbeat: robot with no status for this many cycles is dead
     dead_grace_s: float = 3.0      # a robot whose liveliness token stays gone this long (sim s)
                                    # is dead; shorter gaps (router restart) are forgiven
+    door_min_rv: float = 0.4       # a fence side that its ends' drives or contacts would close
+                                   # (no room at either end) is closed only once probes
+                                   # perpendicular to it at every fraction k/n of its length
+                                   # touched; spacing door_min_rv - 2 x robot radius (x rv), so
+                                   # any opening at least this wide in front of it is driven
+                                   # through (coordinator.evidence). 0.4 with a 0.06 m radius
+                                   # at rv = 1 m: probes at 0, 1/4, 1/2, 3/4, 1
     max_cycles: int = 100000
     final_recheck: bool = True     # after K is empty: redistribute redundant robots, re-certify
 
@@ -76,6 +83,9 @@ class CoordinatorConfig:
             raise ValueError(f"[coordinator] eps_rv = {self.eps_rv!r}: must be in [0, 1)")
         if self.max_paths < 1 or self.robots_max < 1:
             raise ValueError("[coordinator] max_paths and robots_max must be >= 1")
+        if not 0 < self.door_min_rv <= 2.0:
+            raise ValueError(f"[coordinator] door_min_rv = {self.door_min_rv!r}: must be in "
+                             "(0, 2] (x rv)")
         if self.td_retries < 0:
             raise ValueError(f"[coordinator] td_retries = {self.td_retries!r}: must be >= 0")
 

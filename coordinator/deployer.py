@@ -21,6 +21,7 @@ from bus.messages import Complex, Remove, Spawn, Status, Task
 
 from .angles import wrap
 from .config import CoordinatorConfig
+from .evidence import Evidence
 from .planner import CyclePlan, JobSpec, Snapshot, plan_cycle, replan_push
 
 log = logging.getLogger("swarmcover.coordinator")
@@ -97,8 +98,9 @@ class Deployer:
 
     def __init__(self, cfg: CoordinatorConfig, *, sources: list[float], epoch: int = 0,
                  robot_kind: Callable[[int], tuple[str, bool]] | None = None,
-                 planner: Callable[..., CyclePlan] = plan_cycle):
-        """sources: heading (rad, world frame) of each base station, by source index."""
+                 planner: Callable[..., CyclePlan] = plan_cycle, robot_radius: float = 0.06):
+        """sources: heading (rad, world frame) of each base station, by source index.
+        robot_radius: the robots' body radius (m), for the probe spacing (door_min_rv)."""
         self.cfg = cfg
         self.params = cfg.topology()
         self.sources = list(sources)
@@ -110,7 +112,8 @@ class Deployer:
         self.known: list[tuple[int, int, float]] = []  # (f, new vertex, clear drive length)
         self.contact: dict[int, float] = {}          # vertex -> sticky contact bearing
         self.td_contacts: dict[int, list[float]] = {}  # vertex -> contacts of failed drives
-        self.td_failures: dict[int, list[float]] = {}  # vertex -> failed test-drive directions
+        # every drive's outcome: failed directions by vertex, failed probes by edge
+        self.evidence = Evidence(door_min_rv=cfg.door_min_rv, robot_radius_rv=robot_radius / cfg.rv)
         self.redundant: set[int] = set()             # vertices
         self.left: set[int] = set()                  # robots sent away (redundant, idle)
         self.next_robot = 0
@@ -176,6 +179,16 @@ class Deployer:
                 and not _near_any(st.contact_bearing, self.td_contacts.get(v, ()))):
             self.contact[v] = st.contact_bearing
         self._track_tasks(r)
+
+    @property
+    def td_failures(self) -> dict[int, list[float]]:
+        """vertex -> directions of drives from it that touched (from ``evidence``)."""
+        return self.evidence.failed_directions()
+
+    def _evidence_kw(self, snap: Snapshot) -> dict:
+        kw = self.evidence.fence_kwargs(snap.occupant)
+        kw.pop("test_drive_failures")
+        return kw
 
     def _is_test_drive(self, rid: int, task_id: int) -> bool:
         """Whether ``task_id`` is the test drive of a push in flight (it still is when the
@@ -374,7 +387,8 @@ class Deployer:
             scale_correct=(self.cfg.scale_correct_period > 0
                            and self.cycle % self.cfg.scale_correct_period == 0),
             test_drive=self.cfg.test_drive, next_vertex=self.next_vertex,
-            lattice_spacing=self.cfg.d0 if self.cfg.lattice else None)
+            lattice_spacing=self.cfg.d0 if self.cfg.lattice else None,
+            evidence=self._evidence_kw(snap))
         self.next_vertex += len(plan.jobs)
         self.redundant = set(plan.redundant)
         self._out.append(("complex", self._complex_msg(plan, now, "running")))
@@ -487,7 +501,9 @@ class Deployer:
             frontier=list(plan.frontier), obstacle=list(plan.obstacle),
             redundant=sorted(plan.redundant), sources=list(snap.sources),
             certified=bool(plan.complete),
-            robots=sum(1 for r in self.robots.values() if r.alive and not r.dead), state=state)
+            robots=sum(1 for r in self.robots.values() if r.alive and not r.dead), state=state,
+            inferred=[int(e) for e, _ in getattr(plan, "inferred", ())],
+            inferred_why=[str(w) for _, w in getattr(plan, "inferred", ())])
 
     # ------------------------------------------------------------------ jobs
     def _make_job(self, spec: JobSpec) -> PushJob:
@@ -568,7 +584,9 @@ class Deployer:
             placed = self._placed_by(td, spec)
             if placed and dep.state == "pending":
                 # the robot is the new vertex where its drive ended: no deploy, no refine
-                if placed != "wall":  # a clear drive: the new vertex is that far from f
+                self._record(spec, touched=False)
+                if placed != "wall" and spec.via_frac <= 0:
+                    # a clear drive from f: the new vertex is that far from f
                     self.known.append((path[-1], spec.new_vertex, td_length(spec, self.params)))
                 dep.state, dep.reason = "done", placed
                 self._step_done(job, dep)
@@ -747,17 +765,33 @@ class Deployer:
 
     def _test_drive_failed(self, job: PushJob, td: Step) -> None:
         spec = job.spec
+        if td.reason.startswith("via"):
+            # a probe that never reached its point on the edge: no evidence either way; it
+            # is tried again, and given up (reported as inferred) after evidence's limit
+            n = self.evidence.record_unreached(spec.deployment) if spec.deployment else 0
+            log.info("cycle %d: probe from vertex %d at %.2f of %s did not reach the edge "
+                     "(%s, %d times)", self.cycle, spec.path[-1], spec.via_frac,
+                     spec.frontier_edge, td.reason, n)
         if td.reason.startswith("touch"):
             # the direction driven is what failed: the fence blocks deployments near it. The
             # contact was felt where the robot touched, up to wall_keep_rv out, not at the
             # vertex (a door jamb felt "above" is ahead and to the side): on_status keeps it
             # in td_contacts, never as a wall the robot at the vertex rests against
-            self.td_failures.setdefault(spec.path[-1], []).append(float(spec.direction))
+            self._record(spec, touched=True)
             log.info("cycle %d: test drive from vertex %d touched an obstacle: fence side "
                      "of %s -> O", self.cycle, spec.path[-1], spec.frontier_edge)
             if td.reason == "touch" and self._retry(job):
                 return
         self._cancel(job, "test drive touched an obstacle")
+
+    def _record(self, spec, touched: bool) -> None:
+        """Book a drive's outcome (coordinator.evidence): the direction actually driven."""
+        dep = spec.deployment
+        if dep is None:
+            if touched:
+                self.evidence.add_failed_direction(spec.path[-1], float(spec.direction))
+            return
+        self.evidence.record(dep, touched, direction=float(spec.direction))
 
     def _retry(self, job: PushJob) -> bool:
         """Re-plan a push whose test drive touched, within this cycle (spec 3.4(iv): the
@@ -776,7 +810,8 @@ class Deployer:
             snap, self.params, start=job.spec.path[0], busy=busy, exclude=gone,
             test_drive_failures={v: b for v, b in self.td_failures.items() if v in snap.occupant},
             new_vertex=self.next_vertex, scale_correct=job.spec.scale_correct,
-            test_drive=True, lattice_spacing=self.cfg.d0 if self.cfg.lattice else None)
+            test_drive=True, lattice_spacing=self.cfg.d0 if self.cfg.lattice else None,
+            evidence=self._evidence_kw(snap))
         if spec is None:
             return False
         self.next_vertex += 1
@@ -813,12 +848,23 @@ class Deployer:
     def _task_test_drive(self, spec: JobSpec) -> Task:
         f = spec.path[-1]
         lm, br = self._vertex_landmarks(f, exclude=set())
-        return Task(kind="test_drive", vertex=f, landmarks=lm, bearings=br,
+        task = Task(kind="test_drive", vertex=f, landmarks=lm, bearings=br,
                     ref_offsets=self._chained_offsets(f, lm),
                     direction=spec.direction,
                     distance=td_length(spec, self.params),
                     keep_after=self.cfg.wall_keep_rv * self.cfg.rv,
                     timeout_s=self.cfg.task_timeout_s)
+        if spec.via_frac > 0:
+            # a probe: first to the point at via_frac of the edge, on landmarks that stay
+            # put (the push's movers wait for the test drive)
+            occ = self.snapshot.occupant
+            for v, b in zip(spec.via_landmarks, spec.via_bearings):
+                r = occ.get(v)
+                if r is not None and self._live(r) and r in lm:
+                    task.via_landmarks.append(r)
+                    task.via_bearings.append(b)
+            task.via_distance = spec.via_frac * self.cfg.d0
+        return task
 
     def _live(self, rid: int) -> bool:
         r = self.robots.get(rid)

@@ -30,6 +30,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from .angles import circular_mean, wrap, wrap_array
 from .complex import Complex
+from .evidence import probe_depth_rv, probe_fractions
 from .params import TopologyParams
 
 __all__ = ["Deployment", "FenceSide", "FenceEdge", "Fence", "detect_fence"]
@@ -55,6 +56,9 @@ _TOUCH_MARGIN = math.pi / 6.0
 # the box, with the passage itself, straight ahead of one end, never driven into.
 _REFLEX = 7.0 * math.pi / 6.0
 _DEEP = 2.0 * math.pi / 3.0
+# Single-file ends offer every direction of their open wedge 60 deg apart that keeps this
+# far from every neighbour (a little under 60 deg, for bearing noise).
+_SINGLE_CLEAR = math.radians(50.0)
 
 
 @dataclass(frozen=True)
@@ -67,7 +71,16 @@ class Deployment:
     offset: theta_new, the signed angle (rad) from the edge direction to ``bearing``.
     clearance: smallest |angle| (rad) between ``bearing`` and any neighbour bearing
       (pi when the robot has no neighbour).
-    kind: 'edge', 'single_file' or 'isolated'.
+    kind: 'edge', 'single_file', 'isolated' or 'probe'.
+    via_frac: probes only: the drive first goes from ``vertex`` to the point at this
+      fraction of the way toward the edge's other end (0: no approach leg, a plain
+      perpendicular test drive from ``vertex``), then along ``bearing``, perpendicular to
+      the edge into the open side ``sigma``.
+    depth_rv: how far (x rv) the drive along ``bearing`` goes; 0 for non-probes (the
+      configured test-drive length or the planner's placement).
+    A geometric harness executes a probe as: x = p + via_frac * (q - p), then drive from x
+    along the perpendicular for depth_rv * rv; a touch within the deployer's
+    wall_keep_rv sends the robot home (evidence of a wall), no touch leaves it there.
     """
 
     vertex: int
@@ -77,15 +90,21 @@ class Deployment:
     offset: float
     clearance: float
     kind: str
+    via_frac: float = 0.0
+    depth_rv: float = 0.0
 
 
 @dataclass(frozen=True)
 class FenceSide:
     """One open side of a fence edge.
 
-    kind: 'frontier' or 'obstacle'. reason: 'open', 'both_touch', 'convex_corner',
-    'test_drive' or 'forced'. deploy_u / deploy_v: deployment bearings (rad) in the body frames of u
-    and v (None for obstacle sides). offset_u / offset_v: theta_new at u and at v.
+    kind: 'frontier' or 'obstacle'. reason (also ``why``): for obstacle sides 'probes'
+    (evidence: every probe of the side touched), or an inference: 'convex_corner' (the
+    occlusion rule of spec 3.3, pi/3 - 2 beta) or 'forced' (carried over by the caller); for
+    frontier sides 'open', or 'probing' (its ends say "no room", some probe is still
+    untried: only probes are offered on it). deploy_u / deploy_v: deployment bearings (rad)
+    in the body frames of u and v (None for obstacle and probing sides). offset_u / offset_v:
+    theta_new at u and at v.
     """
 
     sigma: int
@@ -95,6 +114,16 @@ class FenceSide:
     deploy_v: float | None = None
     offset_u: float | None = None
     offset_v: float | None = None
+
+    @property
+    def why(self) -> str:
+        """How the side got its kind (the same as ``reason``)."""
+        return self.reason
+
+    @property
+    def inferred(self) -> bool:
+        """An obstacle side closed by inference, not by evidence (probes)."""
+        return self.kind == "obstacle" and self.reason != "probes"
 
 
 @dataclass(frozen=True)
@@ -128,6 +157,8 @@ class Fence:
       the exception set E, and the one-sided fence edges z (the certificate target).
     deployments: node id -> deployments available at that robot, best clearance first.
     frontier_vertices / obstacle_vertices / fence_vertices: node ids.
+    inferred: (edge id, why) for every obstacle side closed by inference rather than by
+      probes ('convex_corner', 'forced'), by edge id.
     """
 
     edges: tuple[FenceEdge, ...]
@@ -142,6 +173,7 @@ class Fence:
     obstacle_vertices: frozenset[int]
     fence_vertices: frozenset[int]
     by_index: Mapping[int, FenceEdge] = field(default_factory=dict)
+    inferred: tuple[tuple[int, str], ...] = ()
 
     @property
     def done(self) -> bool:
@@ -331,6 +363,9 @@ def detect_fence(
     test_drive_failures: Mapping[int, float] | None = None,
     forced_obstacle=(),
     default_bearing: float | Mapping[int, float] = 0.0,
+    probe_failures=(),
+    probe_fracs=None,
+    probe_unreachable=(),
 ) -> Fence:
     """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
 
@@ -403,7 +438,8 @@ def detect_fence(
             recs.append(rec)
         open_sides[e] = recs
 
-    # ---- both-touch rule
+    # ---- both-touch rule: ends evidence only (see "evidence" below)
+    ends: dict[tuple[int, int], str] = {}
     tau = P.tau
     touch_cache: dict[int, float | None] = {}
 
@@ -426,7 +462,7 @@ def detect_fence(
         for rec in recs:
             sg = rec[0]
             if _sgn(au) == sg and _sgn(av) == -sg:
-                marks[(e, sg)] = "both_touch"
+                ends[(e, sg)] = "both_touch"
 
     # ---- test-drive failures (spec 3.4(iv)): a drive along phi that touched blocks the
     # deployments within _FAILED_CONE of phi; the fence sides deploying into it become O
@@ -480,7 +516,58 @@ def detect_fence(
                 # nothing about the other end's deployment, which goes on (a single end's
                 # failure closing the side left whole rooms behind doors uncovered)
                 if _side_closed(u, v, off_u) and _side_closed(v, u, off_v):
-                    marks[(e, sg)] = "test_drive"
+                    ends.setdefault((e, sg), "test_drive")
+
+    # ---- evidence (spec 3.4 amendment 2026-11): ends that have no room are not enough. A
+    # side the ends would close becomes O only once every probe of it touched: the end
+    # probes (perpendicular drives from u and from v: a failed drive or a counted wall
+    # contact within _FAILED_CONE of the perpendicular) and the interior probes (by key).
+    fracs = tuple(probe_fracs) if probe_fracs is not None else probe_fractions()
+    pfail = {(int(a), int(b), int(c), round(float(d), 3)) for a, b, c, d in probe_failures}
+    punreach = {(int(a), int(b), int(c), round(float(d), 3)) for a, b, c, d in probe_unreachable}
+    d0_rv, dtd_rv = P.d0 / P.rv, P.d_td / P.rv
+
+    def _end_probed(p: int, perp: float) -> bool:
+        if any(abs(wrap(perp - phi)) < _FAILED_CONE for phi in failed.get(p, ())):
+            return True
+        c = contact(p)
+        return c is not None and abs(wrap(perp - c)) < _FAILED_CONE
+
+    probing: dict[tuple[int, int], list[Deployment]] = {}
+    for (e, sg), why in sorted(ends.items()):
+        if (e, sg) in marks:
+            continue
+        u, v = int(cx.edges[e, 0]), int(cx.edges[e, 1])
+        iu, iv = int(ids[u]), int(ids[v])
+        pu = wrap(L.bearings(u)[v] + sg * math.pi / 2.0)
+        pv = wrap(L.bearings(v)[u] - sg * math.pi / 2.0)
+        todo: list[Deployment] = []
+        inner: list[Deployment] = []
+        skipped = False
+        for g in fracs:
+            if g <= 1e-9:
+                if not _end_probed(u, pu):
+                    todo.append(Deployment(iu, pu, (iu, iv), sg, sg * math.pi / 2.0,
+                                           L.clearance(u, pu), "probe", 0.0, dtd_rv))
+            elif g >= 1.0 - 1e-9:
+                if not _end_probed(v, pv):
+                    todo.append(Deployment(iv, pv, (iu, iv), sg, -sg * math.pi / 2.0,
+                                           L.clearance(v, pv), "probe", 0.0, dtd_rv))
+            elif (iu, iv, sg, round(g, 3)) in punreach and (iu, iv, sg, round(g, 3)) not in pfail:
+                skipped = True
+            elif (iu, iv, sg, round(g, 3)) not in pfail:
+                depth = probe_depth_rv(g, d0_rv, dtd_rv)
+                # either end can drive it; the nearer one first
+                a = Deployment(iu, pu, (iu, iv), sg, sg * math.pi / 2.0, L.clearance(u, pu),
+                               "probe", round(g, 3), depth)
+                b = Deployment(iv, pv, (iu, iv), sg, -sg * math.pi / 2.0, L.clearance(v, pv),
+                               "probe", round(1.0 - g, 3), depth)
+                inner.extend((a, b) if g <= 0.5 else (b, a))
+        todo.extend(sorted(inner, key=lambda d: d.via_frac))
+        if todo:
+            probing[(e, sg)] = todo
+        else:
+            marks[(e, sg)] = "probe_unreachable" if skipped else "probes"
 
     for pair in forced_obstacle:
         a, b = (int(x) for x in pair)
@@ -505,6 +592,11 @@ def detect_fence(
             why = marks.get((e, sg))
             if why is not None:
                 sides.append(FenceSide(sg, "obstacle", why))
+                continue
+            if (e, sg) in probing:
+                sides.append(FenceSide(sg, "frontier", "probing"))
+                for d in probing[(e, sg)]:
+                    deps.setdefault(cx.index_of(d.vertex), []).append(d)
                 continue
             du = wrap(Bu[v] + off_u)
             dv = wrap(Bv[u] + off_v)
@@ -531,22 +623,33 @@ def detect_fence(
     # neighbours -- the end of a chain; a robot between two opposite neighbours (resultant
     # < 0.5) is inside the chain and has no single-file direction
     K_arr = np.array(sorted(K), dtype=_I64)
+    # Every direction of the open wedge is offered (spec 3.4 amendment: a robot with one
+    # or no neighbour probes every free direction before it gives up): away from the
+    # neighbours, then 60, 120 deg either side, each at least _SINGLE_CLEAR from every
+    # neighbour. A failed drive blocks 30 deg either side, so each touch removes one.
     for p in np.nonzero(single)[0].tolist():
         mean, res = circular_mean(L.bearings(p).values())
         if res < 0.5:
             continue
-        d = wrap(mean + math.pi)
-        deps.setdefault(p, []).append(Deployment(int(ids[p]), d, None, 0, 0.0, L.clearance(p, d), "single_file"))
+        for k in (0, 1, -1, 2, -2):
+            d = wrap(mean + math.pi + k * _PI3)
+            c = L.clearance(p, d)
+            if k == 0 or c >= _SINGLE_CLEAR:
+                deps.setdefault(p, []).append(
+                    Deployment(int(ids[p]), d, None, 0, 0.0, c, "single_file"))
+    # a robot with no neighbour: six directions 60 deg apart from its default bearing
     for p in np.nonzero(cx.degree == 0)[0].tolist():
         if isinstance(default_bearing, Mapping):
-            d = wrap(float(default_bearing.get(int(ids[p]), 0.0)))
+            d0_ = wrap(float(default_bearing.get(int(ids[p]), 0.0)))
         else:
-            d = wrap(float(default_bearing))
-        deps.setdefault(p, []).append(Deployment(int(ids[p]), d, None, 0, 0.0, math.pi, "isolated"))
+            d0_ = wrap(float(default_bearing))
+        for k in range(6):
+            deps.setdefault(p, []).append(Deployment(int(ids[p]), wrap(d0_ + k * _PI3), None, 0,
+                                                     0.0, math.pi, "isolated"))
     # test-drive failures also drop deployments pointing into the failed gap
     for p in failed:
         if p in deps:
-            keep = [dp for dp in deps[p] if not _blocked(p, dp.bearing)]
+            keep = [dp for dp in deps[p] if dp.kind == "probe" or not _blocked(p, dp.bearing)]
             if keep:
                 deps[p] = keep
             else:
@@ -575,7 +678,9 @@ def detect_fence(
     fv_K = frozenset(ids[cx.edges[K_arr]].ravel().tolist()) if K_arr.size else frozenset()
     fv_O = frozenset(ids[cx.edges[O_arr]].ravel().tolist()) if O_arr.size else frozenset()
     frontier_vertices = fv_K | frozenset(deployments)
+    inferred = tuple((f.index, sd.reason) for f in fence_edges for sd in f.sides if sd.inferred)
     return Fence(
+        inferred=inferred,
         edges=tuple(fence_edges),
         frontier=K_arr,
         obstacle=O_arr,

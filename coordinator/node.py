@@ -107,7 +107,8 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
     else:
         headings = [s[2] for s in cfg.map.sources] or [0.0]
     epoch = args.epoch if args.epoch is not None else int(time.time()) % 100_000
-    dep = Deployer(ccfg, sources=headings, epoch=epoch, robot_kind=robot_kinds_from_config(cfg))
+    dep = Deployer(ccfg, sources=headings, epoch=epoch, robot_kind=robot_kinds_from_config(cfg),
+                   robot_radius=cfg.robots.radius)
 
     rx = Receiver(log)
     mb = Mailbox()

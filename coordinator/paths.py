@@ -44,20 +44,35 @@ class PushPath:
         return self.vertices[-1]
 
 
-def deployment_point(cx: Complex, frame_of: int, dep: Deployment, d0: float) -> np.ndarray:
+def deployment_point(cx: Complex, frame_of: int, dep: Deployment, d0: float,
+                     rv: float | None = None) -> np.ndarray:
     """Estimated new position (x, y) of ``dep`` in the body frame of robot ``frame_of``,
-    which must be ``dep.vertex`` or one of its neighbours (assumed spacing d0)."""
+    which must be ``dep.vertex`` or one of its neighbours (assumed spacing d0; a probe's
+    depth_rv is scaled by ``rv``, default d0 / 0.9)."""
+    # a probe ends depth_rv out along its bearing from the point at via_frac of its edge
+    # (edge length taken as d0)
+    reach, off = 1.0, np.zeros(2)
+    if dep.kind == "probe":
+        rv_ = d0 / 0.9 if rv is None else rv
+        reach = dep.depth_rv * rv_ / max(d0, 1e-9) if dep.depth_rv > 0 else 1.0
+        if dep.via_frac > 0 and dep.edge is not None:
+            q = dep.edge[1] if dep.edge[0] == dep.vertex else dep.edge[0]
+            if q in cx:
+                tq = cx.bearing(dep.vertex, q)
+                off = dep.via_frac * np.array([math.cos(tq), math.sin(tq)])
+    own = off + reach * np.array([math.cos(dep.bearing), math.sin(dep.bearing)])
     if frame_of == dep.vertex:
-        return d0 * np.array([math.cos(dep.bearing), math.sin(dep.bearing)])
+        return d0 * own
     t_fg = cx.bearing(frame_of, dep.vertex)  # g seen from f
     t_gf = cx.bearing(dep.vertex, frame_of)  # f seen from g
     rot = wrap(t_fg - t_gf + math.pi)  # heading of g minus heading of f
-    a = dep.bearing + rot
-    return d0 * np.array([math.cos(t_fg) + math.cos(a), math.sin(t_fg) + math.sin(a)])
+    c, s_ = math.cos(rot), math.sin(rot)
+    ox, oy = own
+    return d0 * np.array([math.cos(t_fg) + c * ox - s_ * oy, math.sin(t_fg) + s_ * ox + c * oy])
 
 
 def _dep_key(d: Deployment):
-    return (d.vertex, d.edge, d.sigma, d.kind)
+    return (d.vertex, d.edge, d.sigma, d.kind, d.via_frac)
 
 
 def plan_pushes(
@@ -130,12 +145,12 @@ def plan_pushes(
         if dep.edge is not None:
             blocked_edges.add(dep.edge)
         # drop deployments of neighbours that would land too close to this one
-        p_new = deployment_point(cx, dep.vertex, dep, d0)
+        p_new = deployment_point(cx, dep.vertex, dep, d0, P.rv)
         fid = dep.vertex
         for g_id in cx.neighbours(fid).tolist():
             gi = cx.index_of(g_id)
             for d2 in targets.get(gi, ()):
-                if np.linalg.norm(deployment_point(cx, fid, d2, d0) - p_new) < sep:
+                if np.linalg.norm(deployment_point(cx, fid, d2, d0, P.rv) - p_new) < sep:
                     blocked.add(_dep_key(d2))
         out.append(PushPath(tuple(int(x) for x in cx.ids[path]), dep, cost))
     return out

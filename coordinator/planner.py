@@ -48,6 +48,10 @@ class JobSpec:
     edge deployed from (None for single file / a lone robot). distance: how far the test
     drive goes (rv units) when the planner chose the new position's distance, else None
     (the configured d_td).
+    A probe (kind "probe", coordinator.evidence) first homes to the point at ``via_frac``
+    of the frontier edge from f (``via_landmarks`` / ``via_bearings``, f's occupant's frame;
+    empty for an end probe), then drives ``direction`` (perpendicular to the edge) for
+    ``distance``; it is never moved onto a lattice point.
     """
     path: list[int]
     direction: float
@@ -59,6 +63,11 @@ class JobSpec:
     scale_correct: bool = False
     frontier_edge: tuple[int, int] | None = None
     distance: float | None = None  # test-drive length (same unit as rv); None: d_td
+    kind: str = "edge"             # the Deployment's kind ("probe": evidence, see below)
+    via_frac: float = 0.0          # probe: approach to this fraction of the frontier edge
+    via_landmarks: list[int] = field(default_factory=list)    # probe approach: vertex ids
+    via_bearings: list[float] = field(default_factory=list)   # and their desired bearings
+    deployment: object = None      # the coordinator.fence.Deployment driven (for Evidence)
 
 
 @dataclass
@@ -72,6 +81,7 @@ class CyclePlan:
     obstacle: list[int]
     certified: bool
     hole_edges: list[tuple[int, int]] = field(default_factory=list)
+    inferred: list[tuple[int, str]] = field(default_factory=list)  # (index into edges, why)
     redundant: set[int] = field(default_factory=set)
     jobs: list[JobSpec] = field(default_factory=list)
     open_vertices: set[int] = field(default_factory=set)  # vertices with a deployment left
@@ -90,20 +100,24 @@ def _reports(snap: Snapshot) -> dict[int, dict]:
     return out
 
 
-def _complex_and_fence(snap: Snapshot, params: TopologyParams, failures: dict):
-    """The Rips complex of the snapshot and its fence (spec 2-3)."""
+def _complex_and_fence(snap: Snapshot, params: TopologyParams, failures: dict,
+                       evidence: dict | None = None):
+    """The Rips complex of the snapshot and its fence (spec 2-3). evidence: further
+    detect_fence keywords (probe_failures, probe_fracs, probe_unreachable)."""
     from .complex import build_complex
     from .fence import detect_fence
 
     cx = build_complex(_reports(snap))
     lone_dir = snap.source_dirs[0] if snap.source_dirs else 0.0
-    return cx, detect_fence(cx, params, test_drive_failures=failures, default_bearing=lone_dir)
+    return cx, detect_fence(cx, params, test_drive_failures=failures, default_bearing=lone_dir,
+                            **(evidence or {}))
 
 
 def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy: bool,
                test_drive_failures: dict[int, list[float]], previous_redundant: set,
                protected: set, max_paths: int, scale_correct: bool, test_drive: bool,
-               next_vertex: int, lattice_spacing: float | None = None) -> CyclePlan:
+               next_vertex: int, lattice_spacing: float | None = None,
+               evidence: dict | None = None) -> CyclePlan:
     """Decide one cycle. ``next_vertex``: the first unused vertex id (for new positions).
 
     lattice_spacing: when set (rv units) and every robot is holonomic, each new position
@@ -112,6 +126,10 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     different places mesh instead of colliding; else the spec's 60-deg rule at d_td.
 
     test_drive_failures: vertex -> directions of test drives that touched a wall (sticky).
+    evidence: further detect_fence keywords from coordinator.evidence (probe_failures,
+    probe_fracs, probe_unreachable).
+    certified is False whenever the fence has no one-sided edge (an empty target cycle
+    proves nothing).
     previous_redundant: redundant vertices found earlier (used as path starts until the
     next redundancy pass). protected: vertices that must not be counted redundant.
     """
@@ -119,16 +137,17 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     from .paths import plan_pushes
     from .redundancy import find_redundant
 
-    cx, fence = _complex_and_fence(snap, params, test_drive_failures)
+    cx, fence = _complex_and_fence(snap, params, test_drive_failures, evidence)
     cert = certify(cx, fence)
     ids = cx.ids
     edges = [tuple(int(x) for x in ids[e]) for e in cx.edges]
     tris = [tuple(int(x) for x in ids[t]) for t in cx.triangles]
     plan = CyclePlan(edges=edges, triangles=tris, frontier=[int(e) for e in fence.frontier],
                      obstacle=[int(e) for e in fence.obstacle],
-                     certified=bool(cert.certified),
-                     hole_edges=[tuple(int(x) for x in e) for e in cert.hole_edge_nodes])
-    if redundancy and cert.certified:
+                     certified=bool(cert.certified) and fence.z.size > 0,
+                     hole_edges=[tuple(int(x) for x in e) for e in cert.hole_edge_nodes],
+                     inferred=[(int(e), str(w)) for e, w in fence.inferred])
+    if redundancy and plan.certified:
         prot = set(protected) | set(snap.sources)
         red = find_redundant(cx, fence, cert, protected=prot)
         plan.redundant = {int(v) for v in red.redundant}
@@ -169,7 +188,8 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
 def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: list[JobSpec],
                 exclude: set[int], test_drive_failures: dict[int, list[float]],
                 new_vertex: int, scale_correct: bool, test_drive: bool,
-                lattice_spacing: float | None = None) -> JobSpec | None:
+                lattice_spacing: float | None = None,
+                evidence: dict | None = None) -> JobSpec | None:
     """The next-best push from ``start`` within this cycle, after a test drive touched
     (spec 3.4(iv): "choose the next-best frontier"), or None.
 
@@ -182,7 +202,7 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
     """
     from .paths import plan_pushes
 
-    cx, fence = _complex_and_fence(snap, params, test_drive_failures)
+    cx, fence = _complex_and_fence(snap, params, test_drive_failures, evidence)
     if start not in cx:
         return None
     used = set(exclude) | _claimed(cx, [job.path for job in busy])
@@ -211,7 +231,7 @@ def _claimed(cx, paths) -> set[int]:
 def _job_spec(snap: Snapshot, params: TopologyParams, pth, vid: int, test_drive: bool,
               scale_correct: bool) -> JobSpec:
     """The push along ``pth`` (a paths.PushPath) deploying to new vertex ``vid``."""
-    from .targets import frontier_desired_bearings
+    from .targets import frontier_desired_bearings, probe_via_bearings
 
     dep = pth.deployment
     f = pth.frontier
@@ -219,10 +239,24 @@ def _job_spec(snap: Snapshot, params: TopologyParams, pth, vid: int, test_drive:
                                      rv=params.rv, old_vertex=f)
     start = pth.vertices[0]
     enter = snap.sources.index(start) if start in snap.sources else None
-    return JobSpec(path=list(pth.vertices), direction=float(dep.bearing),
+    spec = JobSpec(path=list(pth.vertices), direction=float(dep.bearing),
                    deploy_landmarks=list(want), deploy_bearings=[want[v] for v in want],
                    new_vertex=vid, enter_source=enter, test_drive=test_drive,
-                   scale_correct=scale_correct, frontier_edge=dep.edge)
+                   scale_correct=scale_correct, frontier_edge=dep.edge, kind=dep.kind,
+                   deployment=dep)
+    if dep.kind == "probe":
+        # a probe is a test drive, whatever the config says; it ends depth_rv out
+        spec.test_drive = True
+        spec.distance = dep.depth_rv * params.rv if dep.depth_rv > 0 else None
+        spec.via_frac = float(dep.via_frac)
+        if dep.via_frac > 0 and dep.edge is not None:
+            q = dep.edge[1] if dep.edge[0] == f else dep.edge[0]
+            nf = snap.nbrs.get(f, {})
+            if q in nf:
+                via = probe_via_bearings(nf, snap.nbrs.get(q, {}), f, q, float(dep.via_frac))
+                spec.via_landmarks = list(via)
+                spec.via_bearings = [via[v] for v in via]
+    return spec
 
 
 def _place_on_lattice(snap: Snapshot, jobs: list[JobSpec], spacing: float,
@@ -263,7 +297,7 @@ def _place_on_lattice(snap: Snapshot, jobs: list[JobSpec], spacing: float,
             taken.append(X[f] + d * np.array([math.cos(a), math.sin(a)]))
     for job in jobs:
         f = job.path[-1]
-        if f not in X:
+        if f not in X or job.kind == "probe":
             continue
         pf = X[f]
         u = np.array([math.cos(job.direction + head.get(f, 0.0)),

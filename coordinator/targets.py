@@ -12,7 +12,8 @@ from typing import Mapping, Sequence
 
 from .angles import wrap
 
-__all__ = ["MoveTarget", "frontier_desired_bearings", "push_desired_bearings", "plan_push_targets"]
+__all__ = ["MoveTarget", "frontier_desired_bearings", "push_desired_bearings", "plan_push_targets",
+           "probe_via_bearings"]
 
 
 @dataclass(frozen=True)
@@ -128,3 +129,44 @@ def plan_push_targets(
             by_r[int(r)] = th
     movers.append(MoveTarget(int(occupant[f]), f, None, by_v, by_r))
     return movers
+
+
+def probe_via_bearings(
+    bearings_p: Mapping[int, float],
+    bearings_q: Mapping[int, float],
+    p: int,
+    q: int,
+    frac: float,
+) -> dict[int, float]:
+    """Desired bearings (rad, p's body frame) at the point x = p + frac (q - p) of the edge
+    p-q: the start of a probe's perpendicular drive (coordinator.evidence).
+
+    Bearing-only: q is seen from x where p sees it. For a common neighbour k (a triangle
+    p, q, k) the angles at p and at q fix the triangle's shape (law of sines:
+    |pk| / |pq| = sin(angle at q) / sin(angle at p + angle at q)), hence k's bearing from x.
+    Of the common neighbours the one seen most nearly at right angles to q from x is used
+    (two landmarks fix the point best there). Returns {q: bearing} plus {k: bearing} when
+    some k gives a well-conditioned triangle; just {q: bearing} for a dangling edge.
+    """
+    tq = float(bearings_p[q])
+    out = {int(q): wrap(tq)}
+    if not p in bearings_q:
+        return out
+    tqp = float(bearings_q[p])
+    best = None
+    for k, tk in bearings_p.items():
+        if k in (p, q) or k not in bearings_q:
+            continue
+        a = abs(wrap(tk - tq))                  # angle at p, between q and k
+        b = abs(wrap(float(bearings_q[k]) - tqp))  # angle at q, between p and k
+        if a < 1e-3 or b < 1e-3 or a + b > math.pi - 1e-3:
+            continue
+        r = math.sin(b) / math.sin(a + b)       # |pk| / |pq|
+        kx, ky = r * math.cos(tk) - frac * math.cos(tq), r * math.sin(tk) - frac * math.sin(tq)
+        bk = math.atan2(ky, kx)
+        score = abs(math.sin(bk - tq))
+        if best is None or score > best[0]:
+            best = (score, int(k), wrap(bk))
+    if best is not None and best[0] > math.sin(math.radians(15.0)):
+        out[best[1]] = best[2]
+    return out

@@ -74,7 +74,8 @@ class SimLoop:
         self.ccfg = CoordinatorConfig.from_section(section, rv=cfg.rv, where=cfg.path)
         headings = [float(s[2]) for s in self.wm.sources] or [0.0]
         self.dep = Deployer(self.ccfg, sources=headings, epoch=1,
-                            robot_kind=robot_kinds_from_config(cfg))
+                            robot_kind=robot_kinds_from_config(cfg),
+                            robot_radius=cfg.robots.radius)
         self.agents: dict = {}
         self.seq: dict[int, int] = {}
         self.status_every = status_every

@@ -39,13 +39,16 @@ def _elem(meta):
     if kind == "polys":
         return st.lists(st.floats(-1e3, 1e3), min_size=6, max_size=12).map(
             lambda v: v[: len(v) // 2 * 2])
+    if kind == "strs":
+        return st.text(max_size=min(meta["maxlen"], 20))
     raise AssertionError(kind)
 
 
 @st.composite
 def messages(draw, cls):
     vals = {}
-    lists = [n for n, m in cls._META.items() if m["kind"] in ("floats", "ints", "bools", "polys")]
+    lists = [n for n, m in cls._META.items()
+             if m["kind"] in ("floats", "ints", "bools", "polys", "strs")]
     lengths = {}
     for group in cls._SAME_LEN:
         n = draw(st.integers(0, 6))
@@ -70,6 +73,8 @@ def messages(draw, cls):
         m = len(vals["edges"]) // 2
         vals["frontier"] = [e % m for e in vals["frontier"]] if m else []
         vals["obstacle"] = [e % m for e in vals["obstacle"]] if m else []
+        vals["inferred"] = [e % m for e in vals["inferred"]] if m else []
+        vals["inferred_why"] = vals["inferred_why"][: len(vals["inferred"])]
     return cls(**vals)
 
 

@@ -8,6 +8,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from coordinator import TopologyParams, build_complex, certify, detect_fence, verify_certificate, wrap
+from coordinator.evidence import Evidence
 from test_topology_geom import boundary_edges_near, lattice, reports
 
 DEG = math.pi / 180
@@ -17,6 +18,22 @@ def _fence(P, **kw):
     fence_kw = {k: kw.pop(k) for k in list(kw) if k in ("test_drive_failures", "default_bearing", "forced_obstacle")}
     cx = build_complex(reports(P, **kw))
     return cx, detect_fence(cx, **fence_kw)
+
+
+def _probed(cx, params=None, **kw):
+    """detect_fence after every probe it asks for has been driven and touched (a wall
+    everywhere in front of every side the ends would close): the fence a run reaches when
+    the ends' evidence was right. ``kw``: test_drive_failures and other detect_fence keywords."""
+    ev = Evidence()
+    ev.merge_failures(kw.pop("test_drive_failures", None) or {})
+    for _ in range(20):
+        f = detect_fence(cx, params, **ev.fence_kwargs(), **kw)
+        probes = [d for lst in f.deployments.values() for d in lst if d.kind == "probe"]
+        if not probes:
+            return f
+        for d in probes:
+            ev.record(d, touched=True)
+    raise AssertionError("probes never ran out")
 
 
 def _pairs(cx, edge_ids):
@@ -94,8 +111,11 @@ def _pair_with_wall(wall_y, touch_gap):
 def test_both_touch_makes_an_obstacle_edge():
     cx, f = _pair_with_wall(-0.05, 0.1)
     e = int(cx.edge_index(0, 1))
+    # both contacts point into the open side: the side is a candidate, not closed yet
+    assert e in f.frontier.tolist() and f.by_index[e].sides[0].reason == "probing"
+    f = _probed(cx)
     assert e in f.obstacle.tolist() and e not in f.frontier.tolist()
-    assert f.by_index[e].sides[0].reason == "both_touch"
+    assert f.by_index[e].sides[0].reason == "probes" and not f.inferred
     assert e in f.z.tolist()  # obstacle edges are fence edges for the certificate
     assert 0 in f.obstacle_vertices and 0 not in {d.vertex for d in f.deployments.get(0, ()) if d.edge == (0, 1)}
 
@@ -111,7 +131,7 @@ def test_one_touch_or_touch_on_the_covered_side_stays_frontier():
     f = detect_fence(cx)
     assert f.obstacle.size == 0
     rep[1].update(touch=True, touch_bearing=-90 * DEG)
-    f = detect_fence(build_complex(rep))
+    f = _probed(build_complex(rep))
     assert _pairs(cx, f.obstacle) == {(0, 1)}
 
 
@@ -130,12 +150,12 @@ def test_both_touch_needs_contacts_clearly_on_the_open_side_not_along_the_edge()
     rep[0].update(touch_bearing=-90 * DEG)
     rep[1].update(touch_bearing=-45 * DEG)
     cx = build_complex(rep)
-    assert _pairs(cx, detect_fence(cx).obstacle) == {(0, 1)}
+    assert _pairs(cx, _probed(cx).obstacle) == {(0, 1)}
     # 35 deg off the line still counts (a wall slanting away under the pair)
     rep[0].update(touch_bearing=-145 * DEG)
     rep[1].update(touch_bearing=-35 * DEG)
     cx = build_complex(rep)
-    assert _pairs(cx, detect_fence(cx).obstacle) == {(0, 1)}
+    assert _pairs(cx, _probed(cx).obstacle) == {(0, 1)}
 
 
 def test_touch_towards_a_visible_robot_is_not_an_obstacle_contact():
@@ -152,7 +172,7 @@ def test_touch_towards_a_visible_robot_is_not_an_obstacle_contact():
     assert int(cx.edge_index(0, 1)) in f.frontier.tolist() and f.obstacle.size == 0
     for i, j in ((0, 3), (1, 4)):  # the same contacts with nobody in sight: a wall
         rep[i]["neighbours"].pop(j)
-    f = detect_fence(build_complex(rep))
+    f = _probed(build_complex(rep))
     assert _pairs(cx, f.obstacle) == {(0, 1)}
 
 
@@ -217,11 +237,16 @@ def test_test_drive_failure_reclassifies_the_touched_side_only():
     f2 = detect_fence(cx, test_drive_failures={0: dep.bearing, 1: [dep1.bearing]})
     assert not _pairs(cx, f2.obstacle)
     (deep1,) = probes(f2, 1, (0, 1))
-    f2 = detect_fence(cx, test_drive_failures={0: [dep.bearing, deep0.bearing],
-                                               1: [dep1.bearing, deep1.bearing]})
+    ends = {0: [dep.bearing, deep0.bearing], 1: [dep1.bearing, deep1.bearing]}
+    f2 = detect_fence(cx, test_drive_failures=ends)
+    # both ends have no room: the side waits for its probes, the only deployments on it
+    e01 = int(cx.edge_index(0, 1))
+    assert f2.by_index[e01].sides[0].reason == "probing" and not f2.obstacle.size
+    assert {d.kind for v in (0, 1) for d in probes(f2, v, (0, 1))} == {"probe"}
+    f2 = _probed(cx, test_drive_failures=ends)
     assert _pairs(cx, f2.obstacle) == {(0, 1)}
     assert _pairs(cx, f2.frontier) == {(0, 2), (1, 2)}
-    assert {f2.by_index[e].sides[0].reason for e in f2.obstacle} == {"test_drive"}
+    assert {f2.by_index[e].sides[0].reason for e in f2.obstacle} == {"probes"}
     # or robot 1 rests against a wall on that side (its contact counts as no room for both
     # of its probes)
     cx_t = build_complex({
@@ -229,7 +254,7 @@ def test_test_drive_failure_reclassifies_the_touched_side_only():
         1: {"neighbours": {0: cx.bearing(1, 0), 2: cx.bearing(1, 2)}, "touch": True,
             "touch_bearing": -math.pi / 2},
         2: {"neighbours": {0: cx.bearing(2, 0), 1: cx.bearing(2, 1)}}})
-    f5 = detect_fence(cx_t, test_drive_failures={0: [dep.bearing, deep0.bearing]})
+    f5 = _probed(cx_t, test_drive_failures={0: [dep.bearing, deep0.bearing]})
     assert _pairs(cx_t, f5.obstacle) == {(0, 1)}
     # failures toward all of 0's probes, and 2's toward 0-2: that side closes too
     fails = {0: [dep.bearing, deep0.bearing], 1: [dep1.bearing, deep1.bearing]}
@@ -239,7 +264,7 @@ def test_test_drive_failure_reclassifies_the_touched_side_only():
     f4 = detect_fence(cx, test_drive_failures=fails)
     fails[0] += [d.bearing for d in probes(f4, 0, (0, 2))]
     fails[2] += [d.bearing for d in probes(f4, 2, (0, 2))]
-    f4 = detect_fence(cx, test_drive_failures=fails)
+    f4 = _probed(cx, test_drive_failures=fails)
     assert _pairs(cx, f4.obstacle) == {(0, 1), (0, 2)}
     assert 0 not in f4.deployments
     # a forced obstacle edge (remembered from an earlier cycle) is an obstacle edge
@@ -269,6 +294,8 @@ def test_drives_that_touched_the_door_jambs_do_not_close_the_door():
     for v in (0, 1):
         fails[v] += [d.bearing for d in f2.deployments[v] if d.edge == (0, 1)]
     f2 = detect_fence(cx, test_drive_failures=fails)
+    assert not f2.obstacle.size           # the ends say wall; probes through the door first
+    f2 = _probed(cx, test_drive_failures=fails)
     assert _pairs(cx, f2.obstacle) == {(0, 1)}
 
 
@@ -283,11 +310,14 @@ def test_dangling_edge_deploys_at_60_degrees_and_single_file_as_fallback():
     # extends in single file, away from its neighbour
     f1 = detect_fence(cx, test_drive_failures={0: [60 * DEG, -60 * DEG]})
     assert int(cx.edge_index(0, 1)) in f1.frontier.tolist()   # 1 has not tried yet
-    f2 = detect_fence(cx, test_drive_failures={0: [60 * DEG, -60 * DEG],
-                                               1: [math.pi - 60 * DEG, -math.pi + 60 * DEG]})
+    f2 = _probed(cx, test_drive_failures={0: [60 * DEG, -60 * DEG],
+                                          1: [math.pi - 60 * DEG, -math.pi + 60 * DEG]})
     assert int(cx.edge_index(0, 1)) in f2.obstacle.tolist()
-    assert [d.kind for d in f2.deployments[0]] == ["single_file"]
+    # single file: every direction of the open wedge, straight away first; the probes'
+    # perpendicular drives (+-90 deg) touched, so those within 30 deg of them are gone
+    assert {d.kind for d in f2.deployments[0]} == {"single_file"}
     assert abs(wrap(f2.deployments[0][0].bearing - math.pi)) < 1e-9
+    assert sorted(round(abs(d.bearing) / DEG) for d in f2.deployments[0]) == [120, 120, 180]
 
 
 
@@ -329,7 +359,7 @@ def test_lattice_with_holes_fences_every_hole(seed):
     holes = [((3.0, 3.0), 0.9), ((7.5, 6.0), 1.1)]
     P, discs = _holey_lattice(rng, holes)
     cx = build_complex(reports(P, discs=discs, touch_gap=0.9))
-    f = detect_fence(cx)
+    f = _probed(cx)
     assert f.exceptions.size == 0 and f.z_repair.size == 0 and _z_is_cycle(cx, f)
     # truth from the geometry: z = the outer boundary plus the rim of every hole
     rims = set()
@@ -401,6 +431,8 @@ def test_a_reflex_end_probes_a_second_direction_before_its_side_closes():
     # an edge of the straight bottom row (1-2): the 60-deg drives from both ends close it
     fails = {1: [below(f, 1, (1, 2))[0].bearing], 2: [below(f, 2, (1, 2))[0].bearing]}
     g = detect_fence(cx, test_drive_failures=fails)
+    assert {d.kind for v in (1, 2) for d in below(g, v, (1, 2))} == {"probe"}
+    g = _probed(cx, test_drive_failures=fails)
     assert (1, 2) in _pairs(cx, g.obstacle)
     assert not below(g, 1, (1, 2)) and not below(g, 2, (1, 2))
     # the corner's edge (0-1): 0's wedge below is 300 deg; after both 60-deg drives touched
@@ -412,5 +444,5 @@ def test_a_reflex_end_probes_a_second_direction_before_its_side_closes():
     assert wrap(deep.bearing) == pytest.approx(-2 * math.pi / 3)
     assert not below(g, 1, (0, 1))          # 1's wedge is straight: no second probe
     fails[0].append(deep.bearing)
-    g = detect_fence(cx, test_drive_failures=fails)
+    g = _probed(cx, test_drive_failures=fails)
     assert (0, 1) in _pairs(cx, g.obstacle)

@@ -1,0 +1,179 @@
+"""Evidence before a fence side closes: the book-keeping of test drives and probes.
+
+Pure: no I/O, no clock, no positions. The deployer records every drive's outcome here, and
+an independent harness that executes the same drives geometrically can do the same; both
+then pass :meth:`Evidence.fence_kwargs` to :func:`coordinator.fence.detect_fence`.
+
+The rule it serves (spec 3.4, amendment 2026-11). A fence side whose two ENDS say "no room"
+(the test-drive rule: both ends' drives touched, or the both-touch rule: both ends rest on a
+wall facing the open side) is not closed on that alone: a door narrower than rv between the
+ends would be closed with it. The side closes only once every PROBE of the side touched. A
+probe is a test drive that first moves from its end p to the point at fraction ``via_frac``
+of the edge p -> q (bearing-only: visual homing on q and on the covered-side apex k, whose
+bearings from that point follow from the triangle's angles), then drives perpendicular to
+the edge into the open side for ``depth_rv`` (x rv). Fractions are spaced so that every
+opening at least ``door_min_rv`` wide lying in front of the edge (edge length <= rv) is
+passed by some probe's line with the robot's body clear of both jambs:
+spacing s = door_min_rv - 2 * robot_radius_rv, fractions 0, 1/n, ..., 1 with n = ceil(1/s).
+(door_min_rv = 0.4, radius 0.06 rv: s = 0.28, fractions 0, 0.25, 0.5, 0.75, 1.)
+
+End probes (fraction 0 from either end) are plain perpendicular test drives from that end:
+they count as failed directions at the end's vertex, so a straight front shares them between
+its adjacent edges (the failed-direction cone of coordinator.fence, 30 deg). Interior probes
+are keyed by (edge, side, fraction): probes of different fractions driven by one robot in one
+direction do not stand in for each other.
+
+Keys are node ids of the complex (the deployer's vertex ids, or a harness's point ids).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Container, Mapping
+
+__all__ = ["ProbeKey", "DriveRecord", "Evidence", "probe_fractions", "probe_depth_rv",
+           "probe_key"]
+
+# (u, v, sigma, frac): edge u < v (node ids), canonical open side sigma (coordinator.fence's
+# convention: +1 is counter-clockwise from v as seen by u), fraction measured from u.
+ProbeKey = tuple[int, int, int, float]
+
+_FRAC_DIGITS = 3
+
+
+def probe_fractions(door_min_rv: float = 0.4, robot_radius_rv: float = 0.06) -> tuple[float, ...]:
+    """Fractions of an edge (from one end, 0 and 1 included) where probes go.
+
+    Spacing s = door_min_rv - 2 * robot_radius_rv (x rv; edge lengths <= rv): an opening of
+    width w >= door_min_rv whose span along the edge lies within the edge holds an interval
+    of length w - 2 r >= s where a robot's centre line clears both jambs, and one probe
+    line falls in it. Raises ValueError (naming the field) when s <= 0."""
+    s = float(door_min_rv) - 2.0 * float(robot_radius_rv)
+    if not s > 0.0 or not math.isfinite(s):
+        raise ValueError(f"[coordinator] door_min_rv = {door_min_rv!r}: must exceed the robot's "
+                         f"diameter ({2.0 * robot_radius_rv:.3g} rv)")
+    n = max(1, math.ceil(1.0 / s - 1e-9))
+    return tuple(round(k / n, _FRAC_DIGITS) for k in range(n + 1))
+
+
+def probe_depth_rv(frac: float, d0_rv: float, d_td_rv: float) -> float:
+    """How far (x rv) a probe at ``frac`` drives perpendicular to its edge.
+
+    End probes (0 or 1) drive the test-drive length. Interior probes keep their end point
+    within d0 of both ends of an edge of length rv: sqrt(d0^2 - max(f, 1 - f)^2), at least
+    a quarter of d0 (for very fine fractions). A probe that does not touch has found room:
+    its robot stays there as the new vertex."""
+    f = float(frac)
+    if f <= 1e-9 or f >= 1.0 - 1e-9:
+        return float(d_td_rv)
+    m = max(f, 1.0 - f)
+    return max(math.sqrt(max(d0_rv * d0_rv - m * m, 0.0)), 0.25 * d0_rv)
+
+
+def probe_key(vertex: int, edge: tuple[int, int], sigma: int, via_frac: float) -> ProbeKey:
+    """Canonical key of the probe of ``edge`` (u < v) on side ``sigma`` driven from
+    ``vertex`` (u or v) at ``via_frac`` from it."""
+    u, v = int(edge[0]), int(edge[1])
+    f = float(via_frac) if int(vertex) == u else 1.0 - float(via_frac)
+    return (u, v, int(sigma), round(f, _FRAC_DIGITS))
+
+
+@dataclass(frozen=True)
+class DriveRecord:
+    """One drive's outcome. vertex: the node it was driven from. direction: the direction
+    driven (rad, that robot's body frame; the perpendicular leg for a probe). kind:
+    Deployment.kind. via_frac: fraction of the approach leg (probes; 0 otherwise)."""
+
+    vertex: int
+    direction: float
+    kind: str
+    edge: tuple[int, int] | None
+    sigma: int
+    via_frac: float
+    touched: bool
+
+
+class Evidence:
+    """Every drive's outcome, turned into detect_fence keyword arguments.
+
+    door_min_rv: narrowest opening (x rv) a closed side is guaranteed to have been probed
+    for. robot_radius_rv: the robot's body radius (x rv).
+    """
+
+    def __init__(self, *, door_min_rv: float = 0.4, robot_radius_rv: float = 0.06):
+        self.door_min_rv = float(door_min_rv)
+        self.robot_radius_rv = float(robot_radius_rv)
+        self.fractions = probe_fractions(door_min_rv, robot_radius_rv)
+        self.records: list[DriveRecord] = []
+        self._failed: dict[int, list[float]] = {}
+        self._probes: set[ProbeKey] = set()
+        self._approach_fails: dict[ProbeKey, int] = {}
+
+    # ---------------------------------------------------------------- recording
+    def record(self, dep, touched: bool, *, direction: float | None = None) -> DriveRecord:
+        """Record the outcome of driving ``dep`` (a coordinator.fence.Deployment, or anything
+        with its fields). ``direction`` overrides dep.bearing (the direction actually driven,
+        e.g. after lattice placement). ``touched``: the drive failed with a touch before it
+        found room (a touch far enough out to keep the robot there is room, not a touch)."""
+        d = float(dep.bearing if direction is None else direction)
+        frac = float(getattr(dep, "via_frac", 0.0) or 0.0)
+        edge = tuple(int(x) for x in dep.edge) if dep.edge is not None else None
+        rec = DriveRecord(int(dep.vertex), d, str(dep.kind), edge, int(dep.sigma), frac,
+                          bool(touched))
+        self.records.append(rec)
+        if touched:
+            if rec.kind == "probe" and edge is not None and frac > 1e-9:
+                self._probes.add(probe_key(rec.vertex, edge, rec.sigma, frac))
+            else:
+                self.add_failed_direction(rec.vertex, d)
+        return rec
+
+    def record_unreached(self, dep) -> int:
+        """An interior probe whose approach leg failed (its robot never reached the point on
+        the edge: "via (...)"). Returns how often that probe has failed so; from
+        UNREACHED_LIMIT on it is given up (``probe_unreachable``): the side may close
+        without it, and is then reported as inferred ("probe_unreachable")."""
+        frac = float(getattr(dep, "via_frac", 0.0) or 0.0)
+        if dep.edge is None or frac <= 1e-9:
+            return 0
+        k = probe_key(int(dep.vertex), tuple(int(x) for x in dep.edge), int(dep.sigma), frac)
+        self._approach_fails[k] = self._approach_fails.get(k, 0) + 1
+        return self._approach_fails[k]
+
+    UNREACHED_LIMIT = 2
+
+    def add_failed_direction(self, vertex: int, direction: float) -> None:
+        """A drive from ``vertex`` along ``direction`` touched (no Deployment at hand)."""
+        lst = self._failed.setdefault(int(vertex), [])
+        if not any(abs(math.remainder(direction - x, 2 * math.pi)) < 1e-9 for x in lst):
+            lst.append(float(direction))
+
+    # ---------------------------------------------------------------- queries
+    def failed_directions(self, present: Container[int] | None = None) -> dict[int, list[float]]:
+        """node -> directions of drives from it that touched (edge, single-file, isolated
+        and end-probe drives): detect_fence's ``test_drive_failures``."""
+        return {v: list(b) for v, b in self._failed.items() if present is None or v in present}
+
+    def failed_probes(self, present: Container[int] | None = None) -> frozenset[ProbeKey]:
+        """Keys of interior probes that touched: detect_fence's ``probe_failures``."""
+        return frozenset(k for k in self._probes
+                         if present is None or (k[0] in present and k[1] in present))
+
+    def unreachable_probes(self, present: Container[int] | None = None) -> frozenset[ProbeKey]:
+        """Keys of interior probes whose approach failed UNREACHED_LIMIT times."""
+        return frozenset(k for k, n in self._approach_fails.items() if n >= self.UNREACHED_LIMIT
+                         and (present is None or (k[0] in present and k[1] in present)))
+
+    def fence_kwargs(self, present: Container[int] | None = None) -> dict:
+        """Keyword arguments for detect_fence: test_drive_failures, probe_failures,
+        probe_unreachable and probe_fracs (restricted to nodes in ``present`` when given)."""
+        return dict(test_drive_failures=self.failed_directions(present),
+                    probe_failures=self.failed_probes(present),
+                    probe_unreachable=self.unreachable_probes(present),
+                    probe_fracs=self.fractions)
+
+    def merge_failures(self, failures: Mapping[int, list[float]]) -> None:
+        """Adopt failed directions kept elsewhere (e.g. a restarted coordinator)."""
+        for v, lst in failures.items():
+            for d in lst:
+                self.add_failed_direction(int(v), float(d))
