@@ -339,36 +339,45 @@ def chain_boundary(triangles) -> set[tuple[int, int]]:
 
 def in_boundary_span(triangles, target_edges) -> bool:
     """True when the edge set ``target_edges`` is the GF(2) boundary of some set of the
-    ``triangles`` (vertex triples). Gaussian elimination on bit rows (one per triangle,
-    one bit per edge); an empty target is trivially a boundary."""
+    ``triangles`` (vertex triples). Gaussian elimination over packed bit rows (one per
+    triangle, one bit per edge); an empty target is trivially a boundary."""
     tgt = {tuple(sorted((int(a), int(b)))) for a, b in target_edges}
     if not tgt:
         return True
     eid: dict[tuple[int, int], int] = {}
-    rows = []
+    tri_e = []
     for t in triangles:
         a, b, c = sorted(int(x) for x in t)
-        bits = 0
-        for e in ((a, b), (a, c), (b, c)):
-            bits ^= 1 << eid.setdefault(e, len(eid))
-        rows.append(bits)
-    z = 0
+        tri_e.append([eid.setdefault(e, len(eid)) for e in ((a, b), (a, c), (b, c))])
+    if any(e not in eid for e in tgt):
+        return False   # an edge in no triangle cannot be in a boundary
+    E = len(eid)
+    W = (E + 63) // 64
+    M = np.zeros((len(tri_e), W), dtype=np.uint64)
+    if tri_e:
+        te = np.array(tri_e, dtype=np.int64)
+        rows = np.repeat(np.arange(te.shape[0]), 3)
+        np.bitwise_xor.at(M, (rows, te.ravel() // 64),
+                          np.left_shift(np.uint64(1), (te.ravel() % 64).astype(np.uint64)))
+    z = np.zeros(W, dtype=np.uint64)
     for e in tgt:
-        if e not in eid:
-            return False   # an edge in no triangle cannot be in a boundary
-        z ^= 1 << eid[e]
-    basis: dict[int, int] = {}   # leading bit -> row
-    for r in rows:
-        while r:
-            h = r.bit_length() - 1
-            if h in basis:
-                r ^= basis[h]
-            else:
-                basis[h] = r
-                break
-    while z:
-        h = z.bit_length() - 1
-        if h not in basis:
-            return False
-        z ^= basis[h]
-    return True
+        k = eid[e]
+        z[k // 64] ^= np.uint64(1) << np.uint64(k % 64)
+    free = np.ones(M.shape[0], dtype=bool)
+    for bit in range(E):
+        w, m = bit // 64, np.uint64(1) << np.uint64(bit % 64)
+        has = (M[:, w] & m) != 0
+        cand = np.nonzero(has & free)[0]
+        zb = bool(z[w] & m)
+        if cand.size == 0:
+            if zb:
+                return False     # no row left can clear this bit of z
+            continue
+        r = int(cand[0])
+        free[r] = False
+        has[r] = False
+        if has.any():
+            M[has] ^= M[r]
+        if zb:
+            z ^= M[r]
+    return not z.any()

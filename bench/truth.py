@@ -8,7 +8,7 @@ facing it. rv = 1 m, robot radius 0.06 m, 0.5 deg Gaussian bearing noise on half
 The growth loop uses the system's real topology core on emulated measurements: the
 complex from the bearings of true positions (``coordinator.build_complex``; who sees whom
 is the oracle's rule, distance <= rv and a clear line of sight), the fence
-(``coordinator.detect_fence``), the pushes (``coordinator.plan_pushes``, up to 3 a cycle
+(``coordinator.detect_fence``), the pushes (``coordinator.plan_pushes``, up to 8 a cycle as the deployer's max_paths,
 from the source), and each deployment executed geometrically: the robot drives d0 = 0.9 rv
 along the deployment bearing; if its disk (radius r) touches a wall within wall_keep =
 0.45 rv of the start it is a failed test drive (fed back to the fence), a touch farther out
@@ -18,16 +18,18 @@ a new robot at d0. A probe (kind "probe", when the fence offers it) first moves
 bearing, with the same outcomes (coordinator.fence's Deployment docstring). Drive outcomes
 go back to the fence through ``coordinator.evidence`` when the project has it (else as
 ``test_drive_failures``). The loop runs until the fence has no deployment left, or a robot
-cap; with no frontier edge either that is a fixed point, where the deployer would finish,
-and ``coordinator.certify`` says certified or not (frontier edges with no deployment left
-are "stuck": the deployer stops uncertified).
+cap; with no frontier edge either that is a fixed point. The claim is then the deployer's
+own finish rule, ``coordinator.planner.plan_cycle`` on the same reports: complete =
+certified (``coordinator.certify``, and whatever the planner adds) with no frontier and no
+deployment (frontier edges with no deployment left are "stuck": the deployer stops
+uncertified).
 
 The oracle judges the end state:
 
-* false certificate: certified at a fixed point while uncovered free area that a robot's
+* false certificate: complete while uncovered free area that a robot's
   body can reach from the source lies farther than 0.5 rv from every wall (components
   above 0.01 m^2 on a 2 cm raster);
-* refusal: a fixed point the oracle finds covered (no such area) that certify refused;
+* refusal: a fixed point the oracle finds covered (no such area) not called complete;
 * complex: the system's edges and triangles against the oracle's Rips complex;
 * algebra: the certificate's chain has boundary z, and z is (or is not) a boundary by the
   oracle's own GF(2) elimination, as certify says.
@@ -310,8 +312,9 @@ class Swarm:
 @dataclass
 class Outcome:
     """One executed deployment: ``result`` is 'clear' (new robot at the drive's end),
-    'wall' (new robot resting at a wall past wall_keep) or 'touch' (failed, nothing
-    placed). ``direction`` is the bearing driven in the deploying robot's body frame."""
+    'wall' (new robot resting at a wall past wall_keep), 'touch' (failed, nothing
+    placed) or 'unreached' (a probe's approach leg touched). ``direction`` is the bearing
+    driven in the deploying robot's body frame."""
 
     vertex: int
     direction: float
@@ -333,6 +336,13 @@ def execute(sw: Swarm, dep) -> Outcome:
         q = sw.pos[b if a == i else a]
         start = p + float(dep.via_frac) * (q - p)
         depth = float(dep.depth_rv) * RV
+        leg = float(np.linalg.norm(start - p))
+        if leg > 1e-9:
+            # the approach leg along the edge: the body may clip a jamb the sight line clears
+            v = start - p
+            t, _, c = sw.drive(p, math.atan2(v[1], v[0]), leg)
+            if c is not None:
+                return Outcome(i, float(dep.bearing), kind, "unreached", t, None, dep)
     else:
         start, depth = p, D0
     trav, end, cdir = sw.drive(start, wdir, depth)
@@ -362,7 +372,10 @@ class Feedback:
 
     def record(self, o: Outcome) -> None:
         if self._ev is not None:
-            self._ev.record(o.deployment, touched=(o.result == "touch"))
+            if o.result == "unreached":
+                self._ev.record_unreached(o.deployment)
+            else:
+                self._ev.record(o.deployment, touched=(o.result == "touch"))
             return
         if o.result == "touch":
             self.failures.setdefault(o.vertex, []).append(o.direction)
@@ -374,7 +387,7 @@ class Feedback:
 
 
 # ---------------------------------------------------------------------------- one map
-def run_map(case: MapCase, *, per_cycle: int = 3, cap: int | None = None,
+def run_map(case: MapCase, *, per_cycle: int = 8, cap: int | None = None,
             headings: str = "zero", cell: float = 0.02) -> dict:
     """Grow one map to its end with the real fence rules and judge it."""
     from coordinator import build_complex, certify, detect_fence, plan_pushes, verify_certificate
@@ -388,7 +401,7 @@ def run_map(case: MapCase, *, per_cycle: int = 3, cap: int | None = None,
     ras = Raster(case.pm, cell)
     free_area = float(ras.free.sum() * ras.cell_area)
     cap = cap or int(4.0 * free_area / RV ** 2) + 30
-    end, cycles, touches, placed = "cycles", 0, 0, Counter()
+    end, cycles, placed, repeats, livelock = "cycles", 0, Counter(), Counter(), []
     t0 = time.process_time()
     for cycles in range(1, 6 * cap + 1):
         cx = build_complex(sw.reports())
@@ -401,7 +414,7 @@ def run_map(case: MapCase, *, per_cycle: int = 3, cap: int | None = None,
         if sw.n >= cap:
             end = "cap"
             break
-        paths = plan_pushes(cx, fence, [0], params=P, max_paths=per_cycle)
+        paths = _pushes(cx, fence, P, per_cycle, plan_pushes)
         deps = [pp.deployment for pp in paths]
         if not deps:
             v = min(fence.deployments)
@@ -410,7 +423,20 @@ def run_map(case: MapCase, *, per_cycle: int = 3, cap: int | None = None,
             o = execute(sw, dep)
             fb.record(o)
             placed[o.result] += 1
+            if o.new_robot is not None:
+                key = (dep.vertex, dep.kind, dep.edge, dep.sigma, round(float(getattr(dep, "via_frac", 0.0)), 3),
+                       round(float(dep.bearing), 2))
+                repeats[key] += 1
+        if repeats and max(repeats.values()) >= 3:
+            # the same deployment placed a robot three times: the fence keeps offering it
+            # although its robots arrived (they stack on one point), a livelock
+            end = "livelock"
+            livelock = [list(map(str, k)) for k, c in repeats.items() if c >= 3][:3]
+            cx = build_complex(sw.reports())
+            fence = detect_fence(cx, P, default_bearing=sw.body(0, case.source_dir), **fb.kwargs())
+            break
     cert = certify(cx, fence)
+    claim = _planner_claim(sw, case, P, fb)
     grow_s = time.process_time() - t0
     pts = sw.points()
     ver = judge(ras, pts, case.source, RV, RADIUS, deep=0.5 * RV, min_area=0.01)
@@ -424,8 +450,8 @@ def run_map(case: MapCase, *, per_cycle: int = 3, cap: int | None = None,
     own_fz = in_boundary_span(o_tris, fz_edges)
     chain_ok = (not cert.certified) or chain_boundary(cert.chain_nodes.tolist()) == {tuple(sorted(e)) for e in z_edges}
     fixed = end == "fixed"
-    false_cert = bool(fixed and cert.certified and not ver.fully_covered)
-    refusal = bool(fixed and not cert.certified and ver.fully_covered)
+    false_cert = bool(claim and not ver.fully_covered)
+    refusal = bool(fixed and not claim and ver.fully_covered)
     hid = []
     if false_cert:
         reasons = {}
@@ -448,7 +474,7 @@ def run_map(case: MapCase, *, per_cycle: int = 3, cap: int | None = None,
         "index": case.index, "seed": case.seed, "kind": case.kind, "door_w": case.door_w,
         "bucket": door_bucket(case.door_w), "noise_deg": case.noise_deg,
         "facing_wall": case.facing_wall, "robots": sw.n, "cycles": cycles, "end": end,
-        "drives": dict(placed), "certified": bool(cert.certified),
+        "drives": dict(placed), "certified": bool(claim), "certify": bool(cert.certified),
         "empty_target": bool(cert.certified and len(z_edges) == 0),
         "slack_closure": int(cert.stats.get("slack_closure", 0)) if cert.certified else 0,
         "verify_with_fence": bool(verify_certificate(cx, cert, fence)) if cert.certified else None,
@@ -460,8 +486,49 @@ def run_map(case: MapCase, *, per_cycle: int = 3, cap: int | None = None,
         "false_certificate": false_cert, "refusal": refusal, "hid_by": hid[:8],
         "complex_ok": sys_edges == o_edges and sys_tris == o_tris,
         "algebra_ok": bool(chain_ok and own_z == bool(cert.certified)),
-        "fence_z_boundary": bool(own_fz), "api": fb.api, "grow_cpu_s": round(grow_s, 3),
+        "fence_z_boundary": bool(own_fz), "livelock": livelock, "api": fb.api, "grow_cpu_s": round(grow_s, 3),
     }
+
+
+def _pushes(cx, fence, P, k: int, plan_pushes) -> list:
+    """Up to k pushes from the source (vertex 0) as coordinator.planner.plan_cycle picks
+    them: vertex-disjoint paths, then further paths from the source (its new robots enter
+    one after another) clear of the earlier paths and of their frontier vertices'
+    neighbours."""
+    chosen = list(plan_pushes(cx, fence, [0], params=P, max_paths=k))
+    while len(chosen) < k:
+        used: set[int] = set()
+        for pp in chosen:
+            used.update(pp.vertices)
+            used.update(int(x) for x in cx.neighbours(pp.vertices[-1]))
+        cand = plan_pushes(cx, fence, [0], params=P, max_paths=1, exclude=used - {0})
+        if not cand or cand[0].frontier in used:
+            break
+        chosen.append(cand[0])
+    return chosen
+
+
+def _planner_claim(sw: Swarm, case: MapCase, P, fb: Feedback) -> bool:
+    """What the deployer would conclude from this swarm: ``coordinator.planner.plan_cycle``
+    on the same reports (no lattice, no redundancy pass), complete = certified with no
+    frontier edge and no deployment left (the deployer's finish)."""
+    import inspect
+    from coordinator.planner import Snapshot, plan_cycle
+
+    reps = sw.reports()
+    snap = Snapshot(occupant={i: i for i in reps}, nbrs={i: r["neighbours"] for i, r in reps.items()},
+                    contact={i: r["touch_bearing"] for i, r in reps.items() if r["touch"]},
+                    kinds={i: "holonomic" for i in reps}, sources=[0],
+                    source_dirs=[sw.body(0, case.source_dir)])
+    kw = fb.kwargs()
+    extra = {}
+    if "evidence" in inspect.signature(plan_cycle).parameters:
+        extra["evidence"] = {k: v for k, v in kw.items() if k != "test_drive_failures"}
+    plan = plan_cycle(snap, P, cycle=0, redundancy=False,
+                      test_drive_failures=kw["test_drive_failures"], previous_redundant=set(),
+                      protected=set(), max_paths=3, scale_correct=False, test_drive=True,
+                      next_vertex=sw.n, lattice_spacing=None, **extra)
+    return bool(plan.complete)
 
 
 def run_index(args) -> dict:
@@ -497,6 +564,7 @@ def summarise(rows: list[dict]) -> dict:
         "maps": len(rows), "errors": len(rows) - len(ok), "fixed_points": len(fixed),
         "capped": sum(r["end"] in ("cap", "cycles") for r in ok),
         "stuck": sum(r["end"] == "stuck" for r in ok),
+        "livelock": sum(r["end"] == "livelock" for r in ok),
         "certified": sum(r["certified"] for r in ok),
         "false_certificates": sum(r["false_certificate"] for r in ok),
         "false_on_doors_ge_0.4": sum(r["false_certificate"] for r in wide),
@@ -518,7 +586,8 @@ def summarise(rows: list[dict]) -> dict:
 def print_table(s: dict, rows: list[dict], out=sys.stdout) -> None:
     p = lambda *a: print(*a, file=out)  # noqa: E731
     p(f"\nmaps {s['maps']} (errors {s['errors']}), fixed points {s['fixed_points']}, capped "
-      f"{s['capped']}, stuck (frontier, no deployment) {s['stuck']}, certified {s['certified']}, mean robots {s['robots_mean']}, fence API {s['api']}")
+      f"{s['capped']}, stuck (frontier, no deployment) {s['stuck']}, livelock (a deployment "
+      f"repeated onto its own robots) {s['livelock']}, certified {s['certified']}, mean robots {s['robots_mean']}, fence API {s['api']}")
     p(f"false certificates: {s['false_certificates']} (doors >= 0.4 rv: {s['false_on_doors_ge_0.4']}; "
       f"source facing a wall: {s['false_facing_wall']}; empty target: {s['false_with_empty_target']})")
     p(f"refusals of covered end states: {s['refusals']} of {s['covered_fixed_points']} "
@@ -580,7 +649,7 @@ def main(argv=None) -> int:
     ap.add_argument("--maps", type=int, default=500)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--jobs", type=int, default=1)
-    ap.add_argument("--per-cycle", type=int, default=3, help="pushes per cycle (default 3)")
+    ap.add_argument("--per-cycle", type=int, default=8, help="pushes per cycle (default 8, the deployer's max_paths)")
     ap.add_argument("--headings", choices=("zero", "random"), default="zero",
                     help="robot body headings: zero (holonomic, parallel frames) or random")
     ap.add_argument("--only", type=int, nargs="*", help="run only these map indices")
