@@ -33,6 +33,7 @@ def td_length(spec: JobSpec, params) -> float:
 
 
 SETTLED_STATES = ("holding", "idle")
+_PROBE_RETRIES = 12   # drives one push may make within a cycle while its probes touch
 
 
 def _near_any(bearing: float, bearings, tol: float = 0.02) -> bool:
@@ -799,21 +800,27 @@ class Deployer:
         reporting. The new push starts where the old one did (a source feeds its pushes in
         order), avoids this cycle's other pushes and every robot no longer where the
         snapshot has it. False when retries are used up or nothing is left to push to."""
-        if job.retries >= self.cfg.td_retries:
+        probe = job.spec.kind == "probe"
+        if (not probe and job.retries >= self.cfg.td_retries) or job.retries >= _PROBE_RETRIES:
+            # a probe that touched moved nothing: the next one goes at once (up to a bound)
             return False
         snap = self.snapshot
         busy = [j.spec for j in self.jobs if j is not job and (not j.aborted or any(
             s.state not in ("pending", "cancelled") for s in j.steps if s.name != "test_drive"))]
         gone = {v for v, rid in snap.occupant.items()
                 if not self._live(rid) or rid in self.left or self.vertex_of.get(rid) != v}
+        if job.spec.free:
+            # a free probe stays at its vertex (nobody refills it): only its next probe
+            gone |= set(snap.occupant) - {job.spec.path[0]}
         spec = replan_push(
             snap, self.params, start=job.spec.path[0], busy=busy, exclude=gone,
             test_drive_failures={v: b for v, b in self.td_failures.items() if v in snap.occupant},
             new_vertex=self.next_vertex, scale_correct=job.spec.scale_correct,
             test_drive=True, lattice_spacing=self.cfg.d0 if self.cfg.lattice else None,
             evidence=self._evidence_kw(snap))
-        if spec is None:
+        if spec is None or (job.spec.free and spec.kind != "probe"):
             return False
+        spec.free = job.spec.free
         self.next_vertex += 1
         fresh = self._make_job(spec)
         log.info("cycle %d: push re-planned after the touch: %s -> %s", self.cycle,

@@ -369,17 +369,49 @@ def detect_fence(
 ) -> Fence:
     """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
 
+    How a side closes (spec 3.4 with the amendment of 2026-11, "evidence before a side
+    closes"). The ends' rules only make a side a CANDIDATE:
+      * test-drive rule: both ends have no room on it -- each end's deployment into it lies
+        within 30 deg of a failed drive of that robot, or within 90 deg of the wall contact
+        it rests against; an end whose open wedge on that side is reflex (> 210 deg) also
+        needs its second probe, 120 deg off the edge, to have failed;
+      * both-touch rule (spec 3.4 i): both ends rest on a wall (no neighbour within tau of
+        the contact) pointing into the open side, each at least 30 deg off the edge's line.
+    A candidate side becomes O (reason 'probes') only once every PROBE of it touched:
+      * end probes: a drive from u (and from v) perpendicular to the edge into the open
+        side -- done when that robot has a failed drive within 30 deg of the perpendicular,
+        or rests on a wall contact within 30 deg of it (shared by adjacent edges);
+      * interior probes at the fractions ``probe_fracs`` (coordinator.evidence, from
+        [coordinator] door_min_rv and the robot's radius: 0.25, 0.5, 0.75 by default) of the
+        edge: approach that point along the edge, then drive perpendicular into the open
+        side; done when its key (u, v, sigma, fraction from u) is in ``probe_failures``.
+      Until then the side stays frontier (reason 'probing') and offers only its missing
+      probes as deployments (kind 'probe', from either end for interior ones). An interior
+      probe in ``probe_unreachable`` (its approach failed repeatedly) counts as done, but a
+      side closed with one is reported as inferred ('probe_unreachable').
+    Inferred closures (no probe): the convex-corner / occlusion rule (pi/3 - 2 beta, reason
+    'convex_corner') and ``forced_obstacle`` ('forced'); ``Fence.inferred`` lists them.
+    Guarantee: with edges <= rv, an opening at least door_min_rv wide lying in front of a
+    side closed on evidence was driven through by a probe whose body cleared both jambs and
+    touched anyway (so the opening does not exist within the probe's depth, 0.5-0.75 rv,
+    nor within a touch's wall_keep_rv). Limits: openings beyond that depth behind a
+    touching probe, narrower openings, and openings straddling an edge's end with less
+    than door_min_rv on either edge are not guaranteed; a dangling edge's interior probes
+    approach open loop (its length assumed d0).
+
     test_drive_failures: node id -> direction, or list of directions (rad, that robot's
-      body frame), of test drives that touched an obstacle (spec 3.4(iv)); its deployments
-      within 30 deg of a failed direction are dropped, and a fence side they served becomes an
-      obstacle side once the edge's other end has no room on it either (its own failed
-      drive, or a wall contact within 90 deg of its deployment). An end whose open wedge
-      on that side is reflex (> 210 deg) has no room only once a second probe, 120 deg off
-      the edge and offered as a deployment after the first touched, failed too.
+      body frame), of drives that touched an obstacle (spec 3.4(iv)), end probes included;
+      its deployments within 30 deg of a failed direction are dropped (probes excepted).
+    probe_failures: keys (u, v, sigma, fraction from u) of interior probes that touched.
+    probe_fracs: fractions where probes go (default ``evidence.probe_fractions()``).
+    probe_unreachable: keys of interior probes given up (their approach kept failing).
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
       e.g. edges reclassified after a failed test drive in an earlier cycle.
-    default_bearing: deployment direction (rad, body frame) of a robot with no
-      neighbour at all; a float, or node id -> direction (missing ids use 0).
+    default_bearing: first deployment direction (rad, body frame) of a robot with no
+      neighbour at all (the others follow 60 deg apart: six in all); a float, or node id ->
+      direction (missing ids use 0).
+    Single-file robots (in no triangle, neighbours on one side) offer every direction of
+    their open wedge 60 deg apart, once their dangling edges' deployments are gone.
     """
     P = params or TopologyParams()
     E = cx.n_edges

@@ -68,6 +68,7 @@ class JobSpec:
     via_landmarks: list[int] = field(default_factory=list)    # probe approach: vertex ids
     via_bearings: list[float] = field(default_factory=list)   # and their desired bearings
     deployment: object = None      # the coordinator.fence.Deployment driven (for Evidence)
+    free: bool = False             # a probe off every path (path [f], nobody refills f)
 
 
 @dataclass
@@ -180,6 +181,35 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     for pth in chosen:
         plan.jobs.append(_job_spec(snap, params, pth, vid, test_drive, scale_correct))
         vid += 1
+    # free probes: a frontier robot away from every push probes its side in the same cycle,
+    # without a path. Most probes touch and cost nothing else; one that finds room leaves
+    # its robot there as the new vertex and its old vertex empty, a hole the next cycles
+    # refill. Its vertex, and every neighbour of it (its landmarks), must be off every push
+    # and off every other probe's neighbourhood.
+    from .paths import PushPath
+    block: set[int] = set(snap.sources)
+    for job in plan.jobs:
+        for v in job.path:
+            block.add(int(v))
+            if v in cx:
+                block.update(int(x) for x in cx.neighbours(v))
+    n_free = 0
+    for f in sorted(fence.deployments):
+        if n_free >= max_paths:
+            break
+        if f in block or f not in cx:
+            continue
+        probes = [d for d in fence.deployments[f] if d.kind == "probe"]
+        nb = {int(x) for x in cx.neighbours(f)}
+        if not probes or nb & block:
+            continue
+        spec = _job_spec(snap, params, PushPath((int(f),), probes[0], 0.0), vid, True, False)
+        spec.free = True
+        plan.jobs.append(spec)
+        vid += 1
+        n_free += 1
+        block.add(int(f))
+        block.update(nb)
     if lattice_spacing and plan.jobs:
         _place_on_lattice(snap, plan.jobs, float(lattice_spacing), params, test_drive_failures)
     return plan

@@ -1,0 +1,252 @@
+"""Evidence before a fence side closes (issue 21 items 1-2, spec 3.4 amendment 2026-11).
+
+Pure-core cases: probes along a side the ends would close, lone robots and single-file ends
+that try every free direction, no certificate from an empty fence. The end-to-end cases
+(lone robot facing a wall, rooms behind 0.7 / 0.8 m doors) are in
+tests/test_coordinator_evidence.py.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from coordinator import build_complex, detect_fence, wrap
+from coordinator.evidence import Evidence, probe_depth_rv, probe_fractions, probe_key
+from coordinator.params import TopologyParams
+from coordinator.planner import Snapshot, plan_cycle
+from coordinator.targets import probe_via_bearings
+
+DEG = math.pi / 180
+
+
+def _reports(P, touch=None):
+    """Reports from positions: everyone within 1.0 sees everyone; touch: id -> bearing."""
+    rep = {}
+    for i, p in enumerate(P):
+        nb = {j: math.atan2(q[1] - p[1], q[0] - p[0]) for j, q in enumerate(P)
+              if j != i and math.dist(p, q) <= 1.0}
+        rep[i] = {"neighbours": nb}
+        if touch and i in touch:
+            rep[i].update(touch=True, touch_bearing=touch[i])
+    return rep
+
+
+def _probes(f):
+    return [d for lst in f.deployments.values() for d in lst if d.kind == "probe"]
+
+
+def test_probe_fractions_follow_from_the_door_width_and_the_robot_size():
+    assert probe_fractions(0.4, 0.06) == (0.0, 0.25, 0.5, 0.75, 1.0)
+    assert probe_fractions(0.6, 0.06) == (0.0, 0.333, 0.667, 1.0)    # s = 0.48: n = 3
+    assert probe_fractions(0.3, 0.06) == tuple(round(k / 6, 3) for k in range(7))
+    with pytest.raises(ValueError, match="door_min_rv"):
+        probe_fractions(0.1, 0.06)
+    # an interior probe's end point stays within d0 of both ends of an edge rv long
+    for f in (0.25, 0.5, 0.75):
+        dep = probe_depth_rv(f, 0.9, 0.9)
+        assert math.hypot(max(f, 1 - f), dep) == pytest.approx(0.9)
+    assert probe_depth_rv(0.0, 0.9, 0.9) == 0.9
+
+
+def test_probe_fractions_pass_every_opening_at_least_door_min_wide():
+    """Any opening of width >= door_min_rv whose span lies on the edge (length <= rv)
+    contains a probe line with the robot's body clear of both jambs."""
+    r = 0.06
+    for dmin in (0.3, 0.4, 0.55):
+        fr = probe_fractions(dmin, r)
+        for L in (0.5, 0.8, 1.0):
+            for a in np.linspace(0.0, L - dmin, 23):
+                lines = [f * L for f in fr]
+                assert any(a + r <= x <= a + dmin - r for x in lines), (dmin, L, a)
+
+
+def _door_pair(door):
+    """Robots 0 and 1 resting on a wall (y = 0.07) on either side of a door ``door`` wide
+    centred between them; apex 2 below (the covered side). Returns (P, reports, hits):
+    hits(x) says whether a robot driving up along x touches the wall."""
+    P = np.array([[0.0, 0.0], [0.95, 0.0], [0.475, -0.75]])
+    lo, hi = 0.475 - door / 2, 0.475 + door / 2
+    rep = _reports(P, touch={0: 90 * DEG, 1: 90 * DEG})
+
+    def hits(x, r=0.06):
+        return not (lo + r <= x <= hi - r)
+
+    return P, rep, hits
+
+
+def _run_probes(cx, P, hits, ev, rounds=10):
+    """Execute every probe geometrically (a drive up at the probe's x) until none is left or
+    one is clear; returns (fence, clear probes)."""
+    clear = []
+    for _ in range(rounds):
+        f = detect_fence(cx, **ev.fence_kwargs())
+        todo = _probes(f)
+        if not todo or clear:
+            return f, clear
+        for d in todo:
+            p = P[d.vertex]
+            q = P[d.edge[1] if d.edge[0] == d.vertex else d.edge[0]]
+            x = (p + d.via_frac * (q - p))[0]
+            touched = hits(x)
+            ev.record(d, touched)
+            if not touched:
+                clear.append(d)
+    return detect_fence(cx, **ev.fence_kwargs()), clear
+
+
+def test_both_touch_across_a_door_does_not_close_it_before_a_probe_through_the_middle():
+    P, rep, hits = _door_pair(0.8)
+    cx = build_complex(rep)
+    f = detect_fence(cx)
+    e = int(cx.edge_index(0, 1))
+    side = f.by_index[e].sides[0]
+    # both contacts point straight into the open side: once this closed the door
+    assert side.kind == "frontier" and side.reason == "probing" and not f.obstacle.size
+    probes = _probes(f)
+    assert {d.edge for d in probes} == {(0, 1)}
+    assert any(d.via_frac == 0.5 for d in probes)          # through the middle
+    # the contacts are the end probes (each points within 30 deg of the perpendicular)
+    assert all(0 < d.via_frac < 1 for d in probes)
+    # execute them: the probes in the door find room, the side never closes
+    f, clear = _run_probes(cx, P, hits, Evidence())
+    assert clear and not f.obstacle.size and e in f.frontier.tolist()
+    # with a wall instead of the door every probe touches and the side closes on evidence
+    f, clear = _run_probes(cx, P, lambda x: True, Evidence())
+    assert not clear and e in f.obstacle.tolist()
+    assert f.by_index[e].sides[0].reason == "probes" and not f.inferred
+
+
+def test_a_side_closes_only_after_all_its_probes_touched():
+    s = 0.9
+    P = np.array([[0.0, 0.0], [s, 0.0], [s / 2, s * math.sqrt(3) / 2]])
+    cx = build_complex(_reports(P))
+    f0 = detect_fence(cx)
+    e = int(cx.edge_index(0, 1))
+    # the ends' 60-deg drives and the reflex second probes below 0-1 touched
+    ev = Evidence()
+    for _ in range(2):
+        f = detect_fence(cx, **ev.fence_kwargs())
+        for v in (0, 1):
+            for d in f.deployments[v]:
+                if d.edge == (0, 1) and d.kind == "edge":
+                    ev.record(d, touched=True)
+    f = detect_fence(cx, **ev.fence_kwargs())
+    assert f.by_index[e].sides[0].reason == "probing"
+    todo = [d for d in _probes(f) if d.edge == (0, 1)]
+    keys = {probe_key(d.vertex, d.edge, d.sigma, d.via_frac) for d in todo if d.via_frac > 0}
+    assert {k[3] for k in keys} == {0.25, 0.5, 0.75}
+    # every probe but the middle one touched: still frontier, the middle one still offered
+    for d in todo:
+        if d.via_frac != 0.5:
+            ev.record(d, touched=True)
+    f = detect_fence(cx, **ev.fence_kwargs())
+    assert e in f.frontier.tolist() and not f.obstacle.size
+    left = [d for d in _probes(f) if d.edge == (0, 1)]
+    assert left and all(d.via_frac == 0.5 for d in left)
+    assert {d.vertex for d in left} == {0, 1}               # either end may drive it
+    # it was clear (room there): the side stays frontier
+    ev.record(left[0], touched=False)
+    assert e in detect_fence(cx, **ev.fence_kwargs()).frontier.tolist()
+    # it touched: now the side closes, on evidence
+    ev.record(left[0], touched=True)
+    f = detect_fence(cx, **ev.fence_kwargs())
+    assert e in f.obstacle.tolist() and f.by_index[e].sides[0].why == "probes"
+    assert f0.by_index[e].sides[0].reason == "open"
+
+
+def test_interior_probes_of_one_robot_in_one_direction_do_not_block_each_other():
+    s = 0.9
+    P = np.array([[0.0, 0.0], [s, 0.0], [s / 2, -s * math.sqrt(3) / 2]])
+    cx = build_complex(_reports(P, touch={0: 90 * DEG, 1: 90 * DEG}))
+    ev = Evidence()
+    f = detect_fence(cx, **ev.fence_kwargs())
+    at0 = [d for d in f.deployments[0] if d.kind == "probe"]
+    first = min(at0, key=lambda d: d.via_frac)
+    ev.record(first, touched=True)
+    f = detect_fence(cx, **ev.fence_kwargs())
+    fr = sorted(d.via_frac for d in f.deployments[0] if d.kind == "probe")
+    assert first.via_frac not in fr and len(fr) == len(at0) - 1
+
+
+def test_unreached_probes_close_a_side_only_as_inferred():
+    P, rep, _ = _door_pair(0.8)
+    cx = build_complex(rep)
+    ev = Evidence()
+    f = detect_fence(cx, **ev.fence_kwargs())
+    for d in _probes(f):
+        if d.via_frac == 0.5:
+            for _ in range(Evidence.UNREACHED_LIMIT):
+                ev.record_unreached(d)
+        else:
+            ev.record(d, touched=True)
+    f = detect_fence(cx, **ev.fence_kwargs())
+    e = int(cx.edge_index(0, 1))
+    assert e in f.obstacle.tolist()
+    assert f.inferred == ((e, "probe_unreachable"),)
+
+
+def test_probe_via_bearings_follow_from_the_triangle():
+    P = np.array([[0.0, 0.0], [0.9, 0.1], [0.3, -0.7], [0.8, -0.6]])
+    rep = _reports(P)
+    for frac in (0.25, 0.5, 0.75):
+        want = probe_via_bearings(rep[0]["neighbours"], rep[1]["neighbours"], 0, 1, frac)
+        x = P[0] + frac * (P[1] - P[0])
+        assert set(want) >= {1} and len(want) == 2
+        for k, b in want.items():
+            d = P[k] - x
+            assert abs(wrap(b - math.atan2(d[1], d[0]))) < 1e-9
+    # a dangling edge: only the other end
+    want = probe_via_bearings({1: 0.3}, {0: 0.3 + math.pi}, 0, 1, 0.5)
+    assert want == {1: pytest.approx(0.3)}
+
+
+def test_a_lone_robot_tries_six_directions_before_it_gives_up():
+    cx = build_complex({0: {"neighbours": {}}})
+    ev = Evidence()
+    for touches in range(7):
+        f = detect_fence(cx, default_bearing=0.3, **ev.fence_kwargs())
+        deps = f.deployments.get(0, ())
+        if touches < 6:
+            assert deps and {d.kind for d in deps} == {"isolated"}, touches
+            assert len(deps) == 6 - touches
+            if touches == 0:
+                assert deps[0].bearing == pytest.approx(0.3)
+            ev.record(deps[0], touched=True)
+        else:
+            assert not deps and f.done and f.z.size == 0
+
+
+def test_an_empty_target_never_certifies():
+    snap = Snapshot(occupant={0: 0}, nbrs={0: {}}, sources=[0], source_dirs=[0.3])
+    fails = {0: [wrap(0.3 + k * math.pi / 3) for k in range(6)]}
+    kw = dict(cycle=3, redundancy=True, previous_redundant=set(), protected=set(), max_paths=4,
+              scale_correct=False, test_drive=True, next_vertex=1)
+    plan = plan_cycle(snap, TopologyParams(d_td=0.9), test_drive_failures={0: fails[0][:1]}, **kw)
+    assert not plan.certified and plan.jobs and plan.open_vertices   # five directions left
+    plan = plan_cycle(snap, TopologyParams(d_td=0.9), test_drive_failures=fails, **kw)
+    assert not plan.certified and not plan.jobs and not plan.open_vertices
+
+
+def test_a_single_file_end_tries_every_direction_of_its_open_wedge():
+    # a chain end: one neighbour, the edge's own sides already closed by probes
+    cx = build_complex({0: {"neighbours": {1: 0.0}}, 1: {"neighbours": {0: math.pi}}})
+    ev = Evidence()
+    ev.merge_failures({1: [math.pi - 60 * DEG, -math.pi + 60 * DEG, 90 * DEG, -90 * DEG]})
+    seen = []
+    for _ in range(30):
+        f = detect_fence(cx, **ev.fence_kwargs())
+        deps = [d for d in f.deployments.get(0, ())]
+        if not deps:
+            break
+        d = deps[0]
+        seen.append((d.kind, round(math.degrees(abs(wrap(d.bearing))))))
+        ev.record(d, touched=True)
+    kinds = {k for k, _ in seen}
+    # the dangling edge's 60-deg drives and probes first, then single file: 180 (away from
+    # the neighbour) and 120 deg either side; 60 deg either side went with the edge drives
+    assert "single_file" in kinds
+    sf = sorted(a for k, a in seen if k == "single_file")
+    assert sf == [120, 120, 180]
+    assert not detect_fence(cx, **ev.fence_kwargs()).deployments.get(0)
