@@ -35,6 +35,8 @@ The oracle judges the end state:
   oracle's own GF(2) elimination, as certify says.
 
 Usage: python bench/truth.py [--maps 500] [--seed 0] [--jobs 1] [--out FILE.json]
+(with --out, each map's result also goes to FILE.json.partial.jsonl as it comes, and a
+rerun resumes from it)
 """
 from __future__ import annotations
 
@@ -619,12 +621,26 @@ def print_table(s: dict, rows: list[dict], out=sys.stdout) -> None:
         p(f"  error #{r['index']} {r['kind']}: {r['error']}")
 
 
-def campaign(maps: int, seed: int, jobs: int = 1, progress=True, **kw) -> list[dict]:
-    work = [(seed, i, kw) for i in range(maps)]
+def campaign(maps: int, seed: int, jobs: int = 1, progress=True, partial: str | None = None,
+             **kw) -> list[dict]:
+    """Run maps 0..maps-1 of campaign ``seed``; ``partial``: append each map's result to
+    this JSON-lines file as it comes (maps already in it are not run again)."""
     rows: list[dict] = []
+    done: set[int] = set()
+    if partial and Path(partial).exists():
+        for line in Path(partial).read_text().splitlines():
+            r = json.loads(line)
+            if r.get("seed") == seed and r["index"] < maps and r["index"] not in done:
+                rows.append(r)
+                done.add(r["index"])
+    work = [(seed, i, kw) for i in range(maps) if i not in done]
     t0 = time.time()
+    sink = open(partial, "a") if partial else None
 
     def tick(r):
+        if sink is not None:
+            sink.write(json.dumps(r) + "\n")
+            sink.flush()
         rows.append(r)
         if progress and (len(rows) % 10 == 0 or len(rows) == maps):
             ok = [x for x in rows if "error" not in x]
@@ -640,6 +656,8 @@ def campaign(maps: int, seed: int, jobs: int = 1, progress=True, **kw) -> list[d
     else:
         for w in work:
             tick(run_index(w))
+    if sink is not None:
+        sink.close()
     rows.sort(key=lambda r: r["index"])
     return rows
 
@@ -663,7 +681,8 @@ def main(argv=None) -> int:
     if a.only:
         rows = [run_index((a.seed, i, kw)) for i in a.only]
     else:
-        rows = campaign(a.maps, a.seed, a.jobs, **kw)
+        rows = campaign(a.maps, a.seed, a.jobs,
+                        partial=(a.out + ".partial.jsonl") if a.out else None, **kw)
     s = summarise(rows)
     s["wall_s"] = round(time.time() - t0, 1)
     s["grow_cpu_s"] = round(sum(r.get("grow_cpu_s", 0.0) for r in rows), 1)
