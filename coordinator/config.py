@@ -64,11 +64,11 @@ class CoordinatorConfig:
                                    # is dead; shorter gaps (router restart) are forgiven
     door_min_rv: float = 0.4       # a fence side that its ends' drives or contacts would close
                                    # (no room at either end) is closed only once probes
-                                   # perpendicular to it at every fraction k/n of its length
-                                   # touched; spacing door_min_rv - 2 x robot radius (x rv), so
-                                   # any opening at least this wide in front of it is driven
-                                   # through (coordinator.evidence). 0.4 with a 0.06 m radius
-                                   # at rv = 1 m: probes at 0, 1/4, 1/2, 3/4, 1
+                                   # perpendicular to it at every interior fraction k/n of its
+                                   # length touched; spacing door_min_rv - 2 x robot radius
+                                   # (x rv), so any opening at least this wide in front of it
+                                   # is driven through (coordinator.evidence). 0.4 with a
+                                   # 0.06 m radius at rv = 1 m: probes at 1/4, 1/2, 3/4
     max_cycles: int = 100000
     final_recheck: bool = True     # after K is empty: redistribute redundant robots, re-certify
 

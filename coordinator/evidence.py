@@ -15,13 +15,15 @@ the edge into the open side for ``depth_rv`` (x rv). Fractions are spaced so tha
 opening at least ``door_min_rv`` wide lying in front of the edge (edge length <= rv) is
 passed by some probe's line with the robot's body clear of both jambs:
 spacing s = door_min_rv - 2 * robot_radius_rv, fractions 0, 1/n, ..., 1 with n = ceil(1/s).
-(door_min_rv = 0.4, radius 0.06 rv: s = 0.28, fractions 0, 0.25, 0.5, 0.75, 1.)
+(door_min_rv = 0.4, radius 0.06 rv: s = 0.28, fractions 0, 0.25, 0.5, 0.75, 1; the ends
+0 and 1 are the edge's own end points.)
 
-End probes (fraction 0 from either end) are plain perpendicular test drives from that end:
-they count as failed directions at the end's vertex, so a straight front shares them between
-its adjacent edges (the failed-direction cone of coordinator.fence, 30 deg). Interior probes
-are keyed by (edge, side, fraction): probes of different fractions driven by one robot in one
-direction do not stand in for each other.
+coordinator.fence asks only for the interior fractions (0 < f < 1): the ends' own drives
+or contacts made the side a candidate, and interior probes at most s apart and less than s
+from the ends cross every opening >= door_min_rv within the edge's span. A recorded probe
+with via_frac 0 (a perpendicular drive from an end) counts as a failed direction at that
+vertex, like any drive. Interior probes are keyed by (edge, side, fraction): probes of
+different fractions driven by one robot in one direction do not stand in for each other.
 
 Keys are node ids of the complex (the deployer's vertex ids, or a harness's point ids).
 """

@@ -118,7 +118,7 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
                test_drive_failures: dict[int, list[float]], previous_redundant: set,
                protected: set, max_paths: int, scale_correct: bool, test_drive: bool,
                next_vertex: int, lattice_spacing: float | None = None,
-               evidence: dict | None = None) -> CyclePlan:
+               evidence: dict | None = None, free_probes: bool = False) -> CyclePlan:
     """Decide one cycle. ``next_vertex``: the first unused vertex id (for new positions).
 
     lattice_spacing: when set (rv units) and every robot is holonomic, each new position
@@ -129,6 +129,9 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     test_drive_failures: vertex -> directions of test drives that touched a wall (sticky).
     evidence: further detect_fence keywords from coordinator.evidence (probe_failures,
     probe_fracs, probe_unreachable).
+    free_probes: also let frontier robots off every push probe without a path (off by
+    default: a clear one leaves its vertex empty, and on corridor_doors an empty cut vertex
+    cut whole chains off the sources).
     certified is False whenever the fence has no one-sided edge (an empty target cycle
     proves nothing).
     previous_redundant: redundant vertices found earlier (used as path starts until the
@@ -194,7 +197,7 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
             if v in cx:
                 block.update(int(x) for x in cx.neighbours(v))
     n_free = 0
-    for f in sorted(fence.deployments):
+    for f in sorted(fence.deployments) if free_probes else ():
         if n_free >= max_paths:
             break
         if f in block or f not in cx:

@@ -269,3 +269,50 @@ def test_diffdrive_contact_bearing_follows_rotation():
     sim.pose[ME][2] = 0.5
     beh.step(sim.sense(ME))
     assert abs(beh.status()["contact_bearing"] - (PI / 2 - 0.5)) < 1e-9
+
+
+@pytest.mark.parametrize("kind", ["holonomic", "diffdrive"])
+def test_probe_homes_to_its_point_on_the_edge_then_drives_perpendicular(kind):
+    """A probe (coordinator.evidence): from vertex p = (0, 0) on the edge p -> q = landmark 1
+    at (0.8, 0), first to the point at half the edge on the bearings of q and of the apex,
+    then perpendicular (down, into the open side) for 0.3: clear, it stays there."""
+    sim = world(me=(0.0, 0.0, 0.0))
+    p = AgentParams(kind=kind)
+    beh = Behaviour(p, ME)
+    via = (0.4, 0.0)
+    lms = [1, 2, 3]
+    beh.on_task(task("test_drive", vertex=4, direction=-PI / 2, distance=0.3, landmarks=lms,
+                     bearings=bearings_from(sim, (0, 0), lms),
+                     ref_offsets=[0.0, 0.0, 0.0] if kind == "diffdrive" else [],
+                     via_landmarks=[1, 2], via_bearings=bearings_from(sim, via, [1, 2]),
+                     keep_after=0.2, timeout_s=120.0))
+    assert run(beh, sim, ME, 3000, until=lambda: beh.task_state != "running")
+    assert beh.task_state == "done", beh.reason
+    # a differential-drive robot turns onto the perpendicular as it goes (unicycle mapping):
+    # its leg is an arc (measured 0.095 m off the straight end point)
+    assert sim.dist(ME, (0.4, -0.3)) < (0.05 if kind == "holonomic" else 0.12)
+    assert sim.pose[ME][1] < -0.2
+
+
+def test_probe_that_touches_goes_home_and_fails_touch_and_a_failed_approach_says_via():
+    wall = ((-3, -0.15), (3, -0.15))
+    sim = world(me=(0.0, 0.0, 0.0), walls=[wall])
+    beh = Behaviour(AgentParams(), ME)
+    lms = [1, 2]
+    home = bearings_from(sim, (0, 0), lms)
+    beh.on_task(task("test_drive", direction=-PI / 2, distance=0.3, landmarks=lms,
+                     bearings=home, via_landmarks=lms,
+                     via_bearings=bearings_from(sim, (0.4, 0.0), lms), keep_after=0.2))
+    assert run(beh, sim, ME, 3000, until=lambda: beh.task_state != "running")
+    assert beh.task_state == "failed" and beh.reason == "touch"
+    assert sim.dist(ME, (0, 0)) < 0.05
+    # the via landmarks vanish during the approach: back home, reason "via (...)"
+    sim = world(me=(0.0, 0.0, 0.0))
+    beh = Behaviour(AgentParams(), ME)
+    beh.on_task(task("test_drive", tid=2, direction=-PI / 2, distance=0.3, landmarks=[1, 2, 3],
+                     bearings=bearings_from(sim, (0, 0), [1, 2, 3]), via_landmarks=[1, 3],
+                     via_bearings=bearings_from(sim, (0.4, 0.0), [1, 3])))
+    run(beh, sim, ME, 3)
+    del sim.pose[3]
+    assert run(beh, sim, ME, 3000, until=lambda: beh.task_state != "running")
+    assert beh.task_state == "failed" and beh.reason.startswith("via ("), beh.reason
