@@ -1,0 +1,174 @@
+"""The independent oracle (bench/oracle.py) and a seeded sample of bench/truth.py's campaign.
+
+The campaign tests grow the first 40 random maps of seed 0 with the system's real fence
+rules and ask the oracle whether every certificate is true. They are meant to fail while the
+system can call a map covered that is not (issue 21): 0 false certificates on every map
+except two-room maps whose door is narrower than 0.4 rv, and every map must reach an end
+(a map that never ends makes no claim to check).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from bench.oracle import (PolyMap, Raster, chain_boundary, coverage, in_boundary_span, judge,
+                          line_of_sight, reachable, rips)
+from bench import truth
+
+RV = 1.0
+R = 0.06
+
+
+def _square(s):
+    return np.array([[0, 0], [s, 0], [s, s], [0, s]], float)
+
+
+def _two_rooms(door):
+    """6 m x 3 m, a 0.1 m wall at x = 3 with a door of width ``door`` centred at y = 1.5."""
+    y0, y1 = 1.5 - door / 2, 1.5 + door / 2
+    return PolyMap(np.array([[0, 0], [3, 0], [3, y0], [3.1, y0], [3.1, 0], [6, 0], [6, 3],
+                             [3.1, 3], [3.1, y1], [3, y1], [3, 3], [0, 3]], float))
+
+
+# ------------------------------------------------------------------------- geometry
+def test_line_of_sight_and_rips_respect_walls():
+    pm = PolyMap(_square(4), [np.array([[1.9, 0.5], [2.1, 0.5], [2.1, 3.5], [1.9, 3.5]])])
+    segs = pm.walls()
+    assert not line_of_sight((1.6, 2.0), (2.4, 2.0), segs)
+    assert line_of_sight((1.6, 3.8), (2.4, 3.8), segs)
+    pts = np.array([[1.6, 2.0], [2.4, 2.0], [1.6, 2.9], [1.6, 3.8], [2.4, 3.8]])
+    edges, tris = rips(pts, segs, RV)
+    assert (0, 1) not in edges            # 0.8 apart, through the wall
+    assert (3, 4) in edges and (0, 2) in edges and (2, 3) in edges
+    assert (0, 3) not in edges            # 1.8 apart
+    assert tris == set()                  # 2-3-4: 2 and 4 are 1.17 apart
+    pts2 = np.array([[0.5, 0.5], [1.3, 0.5], [0.9, 1.1]])
+    assert rips(pts2, segs, RV) == ({(0, 1), (0, 2), (1, 2)}, {(0, 1, 2)})
+
+
+def test_raster_disk_in_an_empty_square():
+    ras = Raster(PolyMap(_square(4)), 0.02)
+    assert ras.free.sum() * ras.cell_area == pytest.approx(16.0, rel=0.01)
+    cov = coverage(ras, [(2.0, 2.0)], RV)
+    assert cov.sum() * ras.cell_area == pytest.approx(math.pi, rel=0.01)
+    # clearance is the distance to the nearest wall: the centre cell is 2 m from all four
+    r, c = ras.cell_of((2.0, 2.0))
+    assert ras.clearance[r, c] == pytest.approx(2.0, abs=0.02)
+
+
+def test_judge_knows_covered_from_uncovered():
+    """3 m x 3 m room. One robot at the centre sees a disk of radius 1 that just fits in
+    the square of points farther than 0.5 m from the walls: its four corners, 4 - pi m^2,
+    are reachable, deep and uncovered. Nine robots 1 m apart cover everything."""
+    pm = PolyMap(_square(3))
+    ras = Raster(pm, 0.02)
+    v = judge(ras, [(1.5, 1.5)], (1.5, 1.5), RV, R)
+    assert not v.fully_covered
+    assert len(v.holes) == 4
+    for area, depth, _ in v.holes:
+        assert area == pytest.approx((4 - math.pi) / 4, rel=0.1)
+        assert depth == pytest.approx(0.5 + (math.sqrt(2) - 1) / math.sqrt(2), abs=0.05)
+    assert v.hole_area == pytest.approx(4 - math.pi, rel=0.05)
+    grid = [(x, y) for x in (0.5, 1.5, 2.5) for y in (0.5, 1.5, 2.5)]
+    v9 = judge(ras, grid, (1.5, 1.5), RV, R)
+    assert v9.fully_covered and v9.covered_fraction == pytest.approx(1.0)
+    # a wall hides what is behind it: the same nine robots with a box in the middle of
+    # the room miss nothing deep (the box leaves no deep cell) ...
+    boxed = PolyMap(_square(3), [np.array([[1.2, 1.2], [1.8, 1.2], [1.8, 1.8], [1.2, 1.8]])])
+    rb = Raster(boxed, 0.02)
+    vb = judge(rb, [p for p in grid if p != (1.5, 1.5)], (0.5, 0.5), RV, R)
+    assert vb.fully_covered
+    # ... but one robot in the corner of a two-room map leaves room B uncovered
+    tr = Raster(_two_rooms(0.8), 0.02)
+    vt = judge(tr, [(0.5, 0.5)], (0.5, 0.5), RV, R)
+    assert not vt.fully_covered and vt.hole_area > 5.0
+
+
+def test_reachability_through_a_door_narrower_than_the_robot():
+    narrow = Raster(_two_rooms(0.10), 0.02)     # door 0.10 m < robot diameter 0.12 m
+    reach = reachable(narrow, (1.0, 1.5), R)
+    assert reach[narrow.cell_of((1.0, 1.0))] and not reach[narrow.cell_of((5.0, 1.5))]
+    # uncovered room B is then no false certificate's business
+    v = judge(narrow, [(1.0, 1.5), (2.0, 1.5)], (1.0, 1.5), RV, R)
+    assert v.holes and all(c[0] < 3.0 for _, _, c in v.holes)
+    wide = Raster(_two_rooms(0.20), 0.02)
+    assert reachable(wide, (1.0, 1.5), R)[wide.cell_of((5.0, 1.5))]
+
+
+def test_gf2_boundary_check():
+    t = [(0, 1, 2), (1, 2, 3)]
+    assert in_boundary_span(t, [(0, 1), (0, 2), (1, 3), (2, 3)])       # the square's rim
+    assert chain_boundary(t) == {(0, 1), (0, 2), (1, 3), (2, 3)}
+    assert not in_boundary_span(t, [(0, 1), (1, 2), (0, 2), (1, 3)])   # not a cycle
+    assert not in_boundary_span([], [(0, 1), (1, 2), (0, 2)])          # no triangle
+    assert in_boundary_span(t, [])
+    # an annulus (hexagon around a hole): the outer rim is not a boundary, outer + inner is
+    ring = [(0, 1, 6), (1, 6, 7), (1, 2, 7), (2, 7, 8), (2, 3, 8), (3, 8, 9),
+            (3, 4, 9), (4, 9, 10), (4, 5, 10), (5, 10, 11), (0, 5, 11), (0, 6, 11)]
+    outer = [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5), (0, 5)]
+    inner = [(6, 7), (7, 8), (8, 9), (9, 10), (10, 11), (6, 11)]
+    assert not in_boundary_span(ring, outer)
+    assert in_boundary_span(ring, outer + inner)
+
+
+# ------------------------------------------------------------------------- harness
+def test_maps_are_seeded_and_sources_face_walls():
+    a, b = truth.make_map(0, 7), truth.make_map(0, 7)
+    assert np.array_equal(a.pm.outer, b.pm.outer) and a.source == b.source
+    cases = [truth.make_map(0, i) for i in range(60)]
+    assert {c.kind for c in cases} == set(truth.KINDS)
+    facing = [c for c in cases if c.facing_wall]
+    assert facing
+    for c in facing:
+        assert c.pm.wall_distance(np.array([c.source]))[0] == pytest.approx(0.3)
+    doors = [c.door_w for c in cases if c.door_w is not None]
+    assert min(doors) >= 0.3 and max(doors) <= 1.2
+
+
+def test_drive_stops_at_walls():
+    sw = truth.Swarm(PolyMap(_square(3)), np.random.default_rng(0), 0.0)
+    trav, end, cdir = sw.drive(np.array([0.3, 1.5]), math.pi, 0.9)
+    assert cdir is not None and trav == pytest.approx(0.3 - R, abs=2e-3)
+    assert cdir == pytest.approx(math.pi, abs=1e-6)
+    trav, end, cdir = sw.drive(np.array([1.5, 1.5]), 0.0, 0.9)
+    assert cdir is None and end == pytest.approx([2.4, 1.5])
+
+
+# ------------------------------------------------------------------------- campaign
+@pytest.fixture(scope="module")
+def sample():
+    rows = truth.campaign(40, 0, 1, progress=False)
+    return rows, truth.summarise(rows)
+
+
+def test_sample_grows_and_agrees_with_the_oracle(sample):
+    rows, s = sample
+    assert s["errors"] == 0, [r["error"] for r in rows if "error" in r]
+    # the system's complex is the oracle's Rips complex, and its certificate answer is the
+    # oracle's own GF(2) answer (the algebra held in issue 21's audit)
+    assert s["complex_mismatch"] == 0
+    assert s["algebra_mismatch"] == 0
+
+
+def test_sample_has_no_false_certificates(sample):
+    """Certified must mean covered: no map (bar doors narrower than 0.4 rv) may end
+    certified while a robot could reach uncovered free area beyond 0.5 rv from walls."""
+    rows, _ = sample
+    bad = [(r["index"], r["kind"], r["door_w"] and round(r["door_w"], 2), r["robots"],
+            r["coverage"], r["hole_area"], [h["reason"] for h in r["hid_by"][:3]])
+           for r in rows if r["false_certificate"]
+           and (r["door_w"] is None or r["door_w"] >= 0.4 * RV)]
+    assert not bad, f"{len(bad)} false certificates (index, kind, door, robots, coverage, hole m^2, why): {bad}"
+
+
+def test_sample_maps_reach_an_end(sample):
+    """Every map ends where the deployer would act: no deployment left (a fixed point, or
+    frontier edges with none left), not a robot cap and not a livelock (the fence offering
+    again a deployment whose robots arrived: they stack on one point). A map that never
+    ends makes no claim, so the false-certificate test above cannot see it."""
+    rows, _ = sample
+    bad = [(r["index"], r["kind"], r["end"], r["robots"], r["livelock"][:1])
+           for r in rows if r["end"] not in ("fixed", "stuck")]
+    assert not bad, f"{len(bad)} maps never ended (index, kind, end, robots, repeated deployment): {bad}"
