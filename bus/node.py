@@ -39,14 +39,16 @@ class UsageError(ValueError):
 Serve = Callable[[argparse.Namespace, zenoh.Session, Keys, Shutdown], "int | None"]
 
 
-def run_node(prog: str, description: str | None, add_args: Callable[[argparse.ArgumentParser], None],
+def run_node(prog: str, description: str | None,
+             add_args: Callable[[argparse.ArgumentParser], None] | argparse.ArgumentParser,
              serve: Serve, *, argv: list[str] | None = None, logger: str | None = None,
              mode: str = "client", session_mode: str | None = None,
              before_session: Callable[[argparse.Namespace], None] | None = None,
              formatter_class=argparse.HelpFormatter) -> int:
     """Parse flags, set up logging, open the session, run ``serve`` inside Shutdown.
 
-    add_args(parser): the process's own flags (the Zenoh flags and --log-level are added).
+    add_args(parser): the process's own flags (the Zenoh flags and --log-level are added);
+      or a ready parser (its ``build_parser()``), completed with whichever of those it lacks.
     serve(args, session, keys, stop): the process's loop; its return value is the exit code
       (None means 0). It must return soon after ``stop.is_set()``.
     mode: the default Zenoh mode of the shared flags; session_mode: force a mode when
@@ -54,9 +56,14 @@ def run_node(prog: str, description: str | None, add_args: Callable[[argparse.Ar
     before_session(args): checks that must fail before any connection (exit 2).
     """
     name = logger or prog.replace(" ", ".")
-    p = argparse.ArgumentParser(prog=prog, description=description, formatter_class=formatter_class)
-    add_args(p)
-    add_zenoh_args(p, mode=mode)
+    if isinstance(add_args, argparse.ArgumentParser):
+        p = add_args
+    else:
+        p = argparse.ArgumentParser(prog=prog, description=description,
+                                    formatter_class=formatter_class)
+        add_args(p)
+    if not any("--connect" in a.option_strings for a in p._actions):
+        add_zenoh_args(p, mode=mode)
     if not any(a.dest == "log_level" for a in p._actions):
         p.add_argument("--log-level", default="INFO", help="logging level (default INFO)")
     args = p.parse_args(argv)

@@ -33,8 +33,8 @@ from collections import deque
 from dataclasses import dataclass
 
 from bus.messages import LiveCmd, MocapPose
-from bus.session import (Mailbox, Receiver, Shutdown, add_zenoh_args, keys_from_args,
-                         open_session, publisher, setup_logging)
+from bus.node import ready, run_node
+from bus.session import Mailbox, Receiver, add_zenoh_args, publisher
 
 from .driver import CommandExpiry
 from .frames import Transform2D, world_to_mocap, wrap
@@ -233,107 +233,105 @@ def make_room(walls: str, run_config: str | None, session, keys) -> Room | None:
     return room
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def _resolve(args) -> None:
+    """The stand-in's parameters, checked before any connection (exit 2 naming the field)."""
     args.run_config = args.run_config or args.run_config_opt
-    setup_logging(args.log_level)
     try:
-        o = resolve(args)
-    except (ValueError, KeyError) as e:
-        log.error("%s", e)
-        return 2
-    keys = keys_from_args(args)
+        args.opts = resolve(args)
+    except KeyError as e:
+        raise ValueError(f"fake-robot: {e}") from None
+
+
+def _serve(args, session, keys, stop) -> int:
+    o = args.opts
+    subs, pubs = [], []
     try:
-        session = open_session(args)
-    except (ValueError, ConnectionError) as e:
-        log.error("%s", e)
-        return 2
-    with Shutdown() as stop:
-        subs, pubs = [], []
-        try:
-            start = o["start"]
-            if start is None and o["sources"]:
-                start = o["sources"][min(o.get("source", 0), len(o["sources"]) - 1)]
-            if start is None:
-                from .node import query_world_info
-                info = query_world_info(session, keys, 5.0)
-                src = o.get("source", 0)
-                if info is not None and len(info.sources) >= 3 * (src + 1):
-                    start = tuple(info.sources[3 * src:3 * src + 3])
-            start = tuple(start) if start is not None else (0.0, 0.0, 0.0)
-            room = make_room(args.walls, args.run_config, session, keys)
-            sim = DiffDriveSim(start, o["drive"], o["seed"], room)
-            expiry = CommandExpiry(o["cmd_timeout"])
-            rng = random.Random(o["seed"] + 7919)
-            mb = Mailbox()
-            rec = Receiver(log)
-            if o["output"] == "zenoh":
-                cmd_key = keys.live_cmd(args.id)
-            else:
-                cmd_key = cmd_vel_key(o["ros_mapping"], o["ros_namespace"], o["ros_domain"],
-                                      o["ros_bridge_namespace"])
-            subs.append(session.declare_subscriber(cmd_key, mb.callback))
-            mocap_pub = publisher(session, keys.mocap(o["body"]), block=False, express=True)
-            pubs.append(mocap_pub)
-            print(f"READY fake-robot {args.id} body={o['body']} commands on {cmd_key}", flush=True)
-            log.info("robot %d (%s) at (%.2f, %.2f, %.2f), mocap up=%s, %s",
-                     args.id, o["body"], *start, o["up_axis"], o["transform"])
-            dt = 0.005
-            t0 = last = time.monotonic()
-            next_mocap = t0
-            n_cmd = bad = 0
-            while not stop.is_set():
-                now = time.monotonic()
-                if args.duration and now - t0 >= args.duration:
-                    break
-                for key, payload, _ in mb.drain():
-                    if o["output"] == "zenoh":
-                        msg = rec.decode(key, payload, LiveCmd)
-                        if msg is None or msg.robot != args.id:
-                            continue
-                        v, w, ttl = msg.v, msg.omega, msg.ttl
-                    else:
-                        try:
-                            tw = decode_twist(payload)
-                        except CdrError as e:
-                            bad += 1
-                            if bad == 1:
-                                log.warning("dropping invalid Twist on %s: %s", key, e)
-                            continue
-                        v, w, ttl = tw.lx, tw.az, 0.0
-                    sim.command(now, v, w)
-                    expiry.on_command(now, v, w, ttl)
-                    n_cmd += 1
-                if expiry.expired(now):           # whoever failed: stop at the robot
-                    sim.command(now, 0.0, 0.0)
-                    log.warning("robot %d: command expired (%.2f s after the last command "
-                                "received): stopping", args.id, expiry.last_ttl)
-                x, y, th = sim.step(now, now - last)
-                last = now
-                if now >= next_mocap:
-                    next_mocap += 1.0 / o["mocap_rate"]
-                    if next_mocap < now:
-                        next_mocap = now + 1.0 / o["mocap_rate"]
-                    mx, my = x + rng.gauss(0, o["noise_m"]), y + rng.gauss(0, o["noise_m"])
-                    mth = th + rng.gauss(0, o["noise_rad"])
-                    pos, q = world_to_mocap(mx, my, mth, o["up_axis"], o["transform"])
-                    mocap_pub.put(MocapPose(body=o["body"], t=time.monotonic(), x=pos[0], y=pos[1],
-                                            z=pos[2], qx=q[0], qy=q[1], qz=q[2], qw=q[3]).encode())
-                stop.wait(max(0.0, dt - (time.monotonic() - now)))
-            log.info("robot %d: %d commands, %d expiry stops, final pose (%.3f, %.3f, %.3f), "
-                     "%.1f s against a wall", args.id, n_cmd, expiry.stops, sim.x, sim.y,
-                     sim.theta, sim.wall_time)
-            print(f"FINAL fake-robot {args.id} x={sim.x:.4f} y={sim.y:.4f} theta={sim.theta:.4f} "
-                  f"commands={n_cmd} expiry_stops={expiry.stops} wall_s={sim.wall_time:.1f}",
-                  flush=True)
-        finally:
-            for s in subs:
-                s.undeclare()
-            for pb in pubs:
-                pb.undeclare()
-            session.close()
+        start = o["start"]
+        if start is None and o["sources"]:
+            start = o["sources"][min(o.get("source", 0), len(o["sources"]) - 1)]
+        if start is None:
+            from .node import query_world_info
+            info = query_world_info(session, keys, 5.0)
+            src = o.get("source", 0)
+            if info is not None and len(info.sources) >= 3 * (src + 1):
+                start = tuple(info.sources[3 * src:3 * src + 3])
+        start = tuple(start) if start is not None else (0.0, 0.0, 0.0)
+        room = make_room(args.walls, args.run_config, session, keys)
+        sim = DiffDriveSim(start, o["drive"], o["seed"], room)
+        expiry = CommandExpiry(o["cmd_timeout"])
+        rng = random.Random(o["seed"] + 7919)
+        mb = Mailbox()
+        rec = Receiver(log)
+        if o["output"] == "zenoh":
+            cmd_key = keys.live_cmd(args.id)
+        else:
+            cmd_key = cmd_vel_key(o["ros_mapping"], o["ros_namespace"], o["ros_domain"],
+                                  o["ros_bridge_namespace"])
+        subs.append(session.declare_subscriber(cmd_key, mb.callback))
+        mocap_pub = publisher(session, keys.mocap(o["body"]), block=False, express=True)
+        pubs.append(mocap_pub)
+        ready(f"fake-robot {args.id} body={o['body']} commands on {cmd_key}")
+        log.info("robot %d (%s) at (%.2f, %.2f, %.2f), mocap up=%s, %s",
+                 args.id, o["body"], *start, o["up_axis"], o["transform"])
+        dt = 0.005
+        t0 = last = time.monotonic()
+        next_mocap = t0
+        n_cmd = bad = 0
+        while not stop.is_set():
+            now = time.monotonic()
+            if args.duration and now - t0 >= args.duration:
+                break
+            for key, payload, _ in mb.drain():
+                if o["output"] == "zenoh":
+                    msg = rec.decode(key, payload, LiveCmd)
+                    if msg is None or msg.robot != args.id:
+                        continue
+                    v, w, ttl = msg.v, msg.omega, msg.ttl
+                else:
+                    try:
+                        tw = decode_twist(payload)
+                    except CdrError as e:
+                        bad += 1
+                        if bad == 1:
+                            log.warning("dropping invalid Twist on %s: %s", key, e)
+                        continue
+                    v, w, ttl = tw.lx, tw.az, 0.0
+                sim.command(now, v, w)
+                expiry.on_command(now, v, w, ttl)
+                n_cmd += 1
+            if expiry.expired(now):           # whoever failed: stop at the robot
+                sim.command(now, 0.0, 0.0)
+                log.warning("robot %d: command expired (%.2f s after the last command "
+                            "received): stopping", args.id, expiry.last_ttl)
+            x, y, th = sim.step(now, now - last)
+            last = now
+            if now >= next_mocap:
+                next_mocap += 1.0 / o["mocap_rate"]
+                if next_mocap < now:
+                    next_mocap = now + 1.0 / o["mocap_rate"]
+                mx, my = x + rng.gauss(0, o["noise_m"]), y + rng.gauss(0, o["noise_m"])
+                mth = th + rng.gauss(0, o["noise_rad"])
+                pos, q = world_to_mocap(mx, my, mth, o["up_axis"], o["transform"])
+                mocap_pub.put(MocapPose(body=o["body"], t=time.monotonic(), x=pos[0], y=pos[1],
+                                        z=pos[2], qx=q[0], qy=q[1], qz=q[2], qw=q[3]).encode())
+            stop.wait(max(0.0, dt - (time.monotonic() - now)))
+        log.info("robot %d: %d commands, %d expiry stops, final pose (%.3f, %.3f, %.3f), "
+                 "%.1f s against a wall", args.id, n_cmd, expiry.stops, sim.x, sim.y,
+                 sim.theta, sim.wall_time)
+        print(f"FINAL fake-robot {args.id} x={sim.x:.4f} y={sim.y:.4f} theta={sim.theta:.4f} "
+              f"commands={n_cmd} expiry_stops={expiry.stops} wall_s={sim.wall_time:.1f}",
+              flush=True)
+    finally:
+        for s in subs:
+            s.undeclare()
+        for pb in pubs:
+            pb.undeclare()
     return 0
 
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node("swarmcover fake-robot", __doc__, build_parser(), _serve, argv=argv,
+                    logger="swarmcover", before_session=_resolve)
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -32,8 +32,8 @@ from collections import deque
 
 from bus.keys import Keys
 from bus.messages import CmdVel, Pose, Spawn, Truth, TwinCmd, WorldInfo
-from bus.session import (Mailbox, Receiver, Shutdown, add_zenoh_args, keys_from_args,
-                         open_session, publisher, setup_logging)
+from bus.node import ready, run_node
+from bus.session import Mailbox, Receiver, add_zenoh_args, publisher
 
 from . import config as hwconfig
 from .frames import mocap_to_world
@@ -342,7 +342,7 @@ class Bridge:
                 nxt["check"] = now + period["check"]
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="swarmcover hwbridge", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("run_config", metavar="CONFIG", help="run config (TOML) with a [hwbridge] section")
@@ -356,57 +356,57 @@ def main(argv: list[str] | None = None) -> int:
                    help="exit after S seconds (default: run until SIGINT/SIGTERM)")
     p.add_argument("--report", metavar="FILE", help="write the tracking report (JSON) at exit")
     p.add_argument("--log-level", default="INFO")
-    args = p.parse_args(argv)
-    setup_logging(args.log_level)
-    try:
-        cfg = hwconfig.load(args.run_config)
-    except (hwconfig.ConfigError, ValueError) as e:
-        log.error("%s", e)
-        return 2
-    keys = keys_from_args(args)
-    try:
-        session = open_session(args)
-    except (ValueError, ConnectionError) as e:
-        log.error("%s", e)
-        return 2
+    return p
+
+
+def _load(args) -> None:
+    """The [hwbridge] section, checked before any connection (exit 2 naming the field)."""
+    args.bridge_cfg = hwconfig.load(args.run_config)  # its ConfigError is a ValueError
+
+
+def _serve(args, session, keys, stop) -> int:
+    cfg = args.bridge_cfg
     bridge = None
-    with Shutdown() as stop:
-        try:
-            fence = None
-            if cfg.geofence == "map" and cfg.map_boundary is None:
-                info = query_world_info(session, keys, args.world_timeout)
-                if info is None or len(info.boundary) < 6:
-                    log.error("%s: [hwbridge] geofence = \"map\" but the config has no "
-                              "[map].boundary and world/info did not answer within %.0f s; "
-                              "give a polygon or geofence = \"none\"", cfg.path, args.world_timeout)
-                    return 2
-                fence = flat_to_polygon(info.boundary)
-            else:
-                fence = cfg.fence_polygon()
-            _check_fence_margin(cfg)
-            try:
-                bridge = Bridge(cfg, session, keys, fence, spawn=args.spawn)
-            except (ValueError, ImportError, ConnectionError) as e:
-                log.error("%s", e)
+    try:
+        fence = None
+        if cfg.geofence == "map" and cfg.map_boundary is None:
+            info = query_world_info(session, keys, args.world_timeout)
+            if info is None or len(info.boundary) < 6:
+                log.error("%s: [hwbridge] geofence = \"map\" but the config has no "
+                          "[map].boundary and world/info did not answer within %.0f s; "
+                          "give a polygon or geofence = \"none\"", cfg.path, args.world_timeout)
                 return 2
-            print(f"READY hwbridge {len(cfg.robots)} live robot(s): "
-                  f"{','.join(str(r.id) for r in cfg.robots)}", flush=True)
-            bridge.run(stop, args.duration)
-        finally:
-            if bridge is not None:
-                bridge.stop_all()
-                rep = bridge.report()
-                try:
-                    bridge.close()
-                except Exception as e:
-                    log.debug("close: %s", e)
-                text = json.dumps(_clean(rep), allow_nan=False)
-                print(f"SUMMARY {text}", flush=True)
-                if args.report:
-                    with open(args.report, "w") as f:
-                        f.write(text + "\n")
-            session.close()
+            fence = flat_to_polygon(info.boundary)
+        else:
+            fence = cfg.fence_polygon()
+        _check_fence_margin(cfg)
+        try:
+            bridge = Bridge(cfg, session, keys, fence, spawn=args.spawn)
+        except (ValueError, ImportError, ConnectionError) as e:
+            log.error("%s", e)
+            return 2
+        ready(f"hwbridge {len(cfg.robots)} live robot(s): "
+              f"{','.join(str(r.id) for r in cfg.robots)}")
+        bridge.run(stop, args.duration)
+    finally:
+        if bridge is not None:
+            bridge.stop_all()
+            rep = bridge.report()
+            try:
+                bridge.close()
+            except Exception as e:
+                log.debug("close: %s", e)
+            text = json.dumps(_clean(rep), allow_nan=False)
+            print(f"SUMMARY {text}", flush=True)
+            if args.report:
+                with open(args.report, "w") as f:
+                    f.write(text + "\n")
     return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node("swarmcover hwbridge", __doc__, build_parser(), _serve, argv=argv,
+                    logger="swarmcover", before_session=_load)
 
 
 def _check_fence_margin(cfg: hwconfig.BridgeConfig) -> None:
