@@ -428,13 +428,8 @@ class ViewServer:
         self.httpd.server_close()
 
 
-def main(argv: list[str] | None = None) -> int:
-    from bus.session import Shutdown, add_zenoh_args, keys_from_args, open_session, setup_logging
-
+def _args(p: argparse.ArgumentParser) -> None:
     from .coverage import KINDS
-
-    p = argparse.ArgumentParser(prog="swarmcover view", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--port", type=int, default=8765, help="HTTP port (default 8765; 0 = any free)")
     p.add_argument("--host", default="127.0.0.1",
                    help="address to serve on (default 127.0.0.1: this machine only)")
@@ -454,52 +449,50 @@ def main(argv: list[str] | None = None) -> int:
                    help="ROS_DOMAIN_ID of --ros2 (default 0)")
     p.add_argument("--ros-namespace", default="/swarmcover", metavar="NS",
                    help="ROS namespace of the --ros2 topics (default /swarmcover)")
-    p.add_argument("--log-level", default="INFO")
-    add_zenoh_args(p)
-    args = p.parse_args(argv)
-    setup_logging(args.log_level, "swarmcover.view")
-    keys = keys_from_args(args)
+
+
+def _serve(args, session, keys, stop) -> int:
+    from bus.node import ready
     from bus.session import DEFAULT_ROUTER
     router = ", ".join(args.connect or ([] if args.mode in ("peer", "router")
                                         else [DEFAULT_ROUTER])) or f"{args.mode} mode"
-    try:
-        session = open_session(args)
-    except (ValueError, ConnectionError) as e:
-        log.error("%s", e)
-        return 2
     view = None
     try:
-        with Shutdown() as stop:
-            try:
-                view = ViewServer(session, keys, host=args.host, port=args.port,
-                                  max_hz=args.max_hz, coverage=args.coverage, router=router,
-                                  foxglove_port=args.foxglove_port if args.foxglove else None,
-                                  ros2=({"domain": args.ros_domain,
-                                         "namespace": args.ros_namespace}
-                                        if args.ros2 else None))
-            except ValueError as e:  # --ros-domain / --ros-namespace
-                log.error("%s", e)
-                return 2
-            except OSError as e:
-                log.error("--host %s --port %d: cannot serve: %s", args.host, args.port, e)
-                return 2
-            except RuntimeError as e:  # foxglove-sdk: port taken, bad host
-                log.error("--foxglove-port %d: cannot serve: %s", args.foxglove_port, e)
-                return 2
-            view.start()
-            if view.foxglove_url:
-                print(f"READY foxglove {view.foxglove_url}", flush=True)
-            if view.ros2 is not None:
-                print("READY ros2 " + " ".join(view.ros2.topics.values()), flush=True)
-            print(f"READY view {view.url}", flush=True)
-            log.info("live view of %s (router %s) at %s", keys.prefix, router, view.url)
-            while not stop.is_set():
-                view.pump(0.05)
+        try:
+            view = ViewServer(session, keys, host=args.host, port=args.port,
+                              max_hz=args.max_hz, coverage=args.coverage, router=router,
+                              foxglove_port=args.foxglove_port if args.foxglove else None,
+                              ros2=({"domain": args.ros_domain,
+                                     "namespace": args.ros_namespace}
+                                    if args.ros2 else None))
+        except ValueError as e:  # --ros-domain / --ros-namespace
+            log.error("%s", e)
+            return 2
+        except OSError as e:
+            log.error("--host %s --port %d: cannot serve: %s", args.host, args.port, e)
+            return 2
+        except RuntimeError as e:  # foxglove-sdk: port taken, bad host
+            log.error("--foxglove-port %d: cannot serve: %s", args.foxglove_port, e)
+            return 2
+        view.start()
+        if view.foxglove_url:
+            ready(f"foxglove {view.foxglove_url}")
+        if view.ros2 is not None:
+            ready("ros2 " + " ".join(view.ros2.topics.values()))
+        ready(f"view {view.url}")
+        log.info("live view of %s (router %s) at %s", keys.prefix, router, view.url)
+        while not stop.is_set():
+            view.pump(0.05)
     finally:
         if view is not None:
             view.close()
-        session.close()
     return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    from bus.node import run_node
+    return run_node("swarmcover view", __doc__, _args, _serve, argv=argv,
+                    logger="swarmcover.view", formatter_class=argparse.RawDescriptionHelpFormatter)
 
 
 if __name__ == "__main__":
