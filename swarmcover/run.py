@@ -281,7 +281,8 @@ def main(argv: list[str] | None = None) -> int:
                     .wait_ready("READY router", 30)
             print(f"swarmcover run: {cfg.name} -> {out}/  (router {endpoint}, swarm {swarm})",
                   file=sys.stderr, flush=True)
-            launcher.start("world", ["world", conf_path]).wait_ready("READY world", 60)
+            launcher.start("world", ["world", conf_path, "--await-coordinator", "120"]) \
+                .wait_ready("READY world", 60)
             session = _open(endpoint, swarm)
             rc = _supervise(args, cfg, wmap, conf_path, launcher, session, Keys(swarm), out,
                             stop, state, t_wall0, live_limits)
@@ -344,6 +345,7 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
     recorder = None
     last_cx: Complex | None = None
     last_truth: Truth | None = None
+    truths: dict[int, Truth] = {}   # recent ground truth by tick: the final complex's tick
     cycles_f = open(out / "cycles.jsonl", "w")
     spawned = 0
     progress = Progress(label=cfg.name, enabled=not args.quiet, every_s=10.0)
@@ -375,6 +377,9 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                         spawned += 1
                 elif rel == "world/truth":
                     last_truth = rx.decode(key, payload, Truth) or last_truth
+                    if last_truth is not None:
+                        truths[last_truth.tick] = last_truth
+                        truths.pop(last_truth.tick - 400, None)
                 elif rel == "coord/complex":
                     cx = rx.decode(key, payload, Complex)
                     if cx is None:
@@ -427,6 +432,13 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
     for item in mb.drain():
         if keys.relative(item[0]) == "world/truth":
             last_truth = rx.decode(item[0], item[1], Truth) or last_truth
+            if last_truth is not None:
+                truths[last_truth.tick] = last_truth
+    if final_state is not None and last_cx is not None:
+        # the world at the tick the coordinator decided (lockstep: the same every run), not
+        # wherever it had got to by the time this loop stopped
+        at = [tr for tr in truths.values() if abs(tr.t - last_cx.t) < 1e-6]
+        last_truth = at[0] if at else last_truth
     state["certified"] = final_state == "certified"
     if final_state == "stopped":
         state["reason"] = "the coordinator stopped before certifying (see logs/coordinator.log)"
