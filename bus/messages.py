@@ -461,7 +461,7 @@ class Complex(Message):
                 raise WireError(self.TAG, name, f"edge index {bad[0]} >= {m} edges")
 
 
-@message("Clock")
+@message("Clock", same_len=(("agents", "status_seqs"),))
 class Clock(Message):
     """World -> all: simulation time. rtf: measured real-time factor (sim s per wall s).
 
@@ -476,12 +476,9 @@ class Clock(Message):
     agents: list = optional(f_ints(0))
     status_seqs: list = optional(f_ints(-1))
 
-    def _post_check(self):
-        if len(self.agents) != len(self.status_seqs):
-            raise WireError(self.TAG, "status_seqs", "must have one entry per agent")
 
-
-@message("CoordAck")
+@message("CoordAck", same_len=(("task_robots", "task_ids"),
+                               ("spawn_ids", "spawn_sources", "spawn_live", "spawn_kinds")))
 class CoordAck(Message):
     """Coordinator -> world (lockstep): tick ``tick``'s decisions are out.
 
@@ -497,14 +494,6 @@ class CoordAck(Message):
     spawn_live: list = f_bools()
     spawn_kinds: list = f_ints(0, len(ROBOT_KINDS) - 1)   # index into ROBOT_KINDS
     remove_ids: list = f_ints(0)
-
-    def _post_check(self):
-        if len(self.task_robots) != len(self.task_ids):
-            raise WireError(self.TAG, "task_ids", "must have one entry per task robot")
-        n = len(self.spawn_ids)
-        for name in ("spawn_sources", "spawn_live", "spawn_kinds"):
-            if len(getattr(self, name)) != n:
-                raise WireError(self.TAG, name, "must have one entry per spawn")
 
 
 @message("Spawn")
