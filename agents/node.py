@@ -219,7 +219,7 @@ class AgentNode:
                     self._invalid(key, f"Task.robot {msg.robot} is not {self.rid}")
                     continue
                 self.tasks.append([msg, 0])
-                if self.barrier is False:
+                if not self.barrier:  # no barrier (or no Sense yet): apply it now
                     self._apply_tasks(len(self.tasks))
             elif key == self.k_odom:
                 msg = self.rx.decode(key, payload, Pose)
