@@ -88,7 +88,9 @@ class TickSync:
 
     ``add_status`` buffers statuses as they arrive; ``missing(clk)`` says which robots'
     announced statuses have not arrived yet; ``take(clk)`` returns the tick's roster changes
-    and its statuses in (robot, seq) order, and forgets them.
+    and its statuses in (robot, seq) order, and forgets them. Live robots (Status.live) move
+    in real time and are in no roster: their statuses and liveliness changes
+    (``add_alive``) are handed over at the next boundary as they came.
     """
 
     def __init__(self):
@@ -97,8 +99,17 @@ class TickSync:
         self.done: dict[int, int] = {}      # rid -> highest seq handed to the deployer
         self.roster: set[int] = set()
         self.first = True
+        self.live: set[int] = set()         # robots that reported live = true
+        self.alive_events: list[tuple[int, bool]] = []
+
+    def add_alive(self, rid: int, present: bool) -> None:
+        """A liveliness change; only live robots' count (the roster stands for the rest)."""
+        if rid in self.live:
+            self.alive_events.append((rid, present))
 
     def add_status(self, st: Status) -> None:
+        if st.live:
+            self.live.add(st.robot)
         b = self.buf.setdefault(st.robot, [])
         if len(b) >= 1000:
             b.pop(0)
@@ -115,10 +126,18 @@ class TickSync:
         """(left, joined, statuses) of this boundary."""
         now = set(clk.agents)
         left, joined = sorted(self.roster - now), sorted(now - self.roster)
+        for rid, present in self.alive_events:
+            (joined if present else left).append(rid)
+        self.alive_events = []
         for r in left:
-            self.buf.pop(r, None)
+            if r not in self.live:
+                self.buf.pop(r, None)
+        seqs = dict(zip(clk.agents, clk.status_seqs))
+        for r in self.live - now:
+            if self.buf.get(r):
+                seqs[r] = self.buf[r][-1].seq
         out: list[Status] = []
-        for r, s in sorted(zip(clk.agents, clk.status_seqs)):
+        for r, s in sorted(seqs.items()):
             b = self.buf.get(r)
             if not b:
                 continue
@@ -236,6 +255,7 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
     wait_since: float | None = None
     last_ack: tuple[int, bytes] | None = None
     status_waits = 0
+    busy_s, ticks = 0.0, 0
     print(f"READY coordinator epoch {epoch}", flush=True)
     log.info("coordinator up: swarm %s, rv %.2f, %d source(s), push_mode %s, %s", keys.swarm,
              ccfg.rv, len(headings), ccfg.push_mode,
@@ -306,6 +326,8 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
     def boundary(clk: Clock) -> None:
         """Lockstep: the deployer's step of tick clk.tick, on that tick's roster changes
         and statuses alone."""
+        nonlocal busy_s, ticks
+        t0 = time.monotonic()
         left, joined, statuses = sync.take(clk)
         for rid in left:
             dep.on_alive(rid, False, clk.t)
@@ -316,6 +338,8 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
         execute(dep.step(clk.t), clk.tick)
         if dep.done and not args.exit_on_done:
             dep.reopen_if_needed(clk.t)
+        busy_s += time.monotonic() - t0
+        ticks += 1
 
     try:
         while not stop.is_set():
@@ -325,7 +349,11 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
                 rel = keys.relative(key)
                 if rel.startswith("alive/robot/"):
                     rid = keys.robot_id(key)
-                    if rid is not None and not lockstep:  # lockstep: the Clock's roster
+                    if rid is None:
+                        continue
+                    if lockstep:   # the Clock's roster, except for live robots
+                        sync.add_alive(rid, kind == zenoh.SampleKind.PUT)
+                    else:
                         dep.on_alive(rid, kind == zenoh.SampleKind.PUT, now)
                     continue
                 msg = decode(key, rel, payload)
@@ -388,6 +416,9 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
             log.warning("dropped %d invalid messages", rx.invalid_total)
         if trust.rejected:
             log.warning("ignored %d implausible clocks", trust.rejected)
+        if ticks:
+            log.info("lockstep: %d ticks, %.1f s deciding (%.2f ms a tick)", ticks, busy_s,
+                     1e3 * busy_s / ticks)
         if status_waits:
             log.warning("%d ticks went on without announced statuses", status_waits)
     return rc

@@ -95,6 +95,13 @@ def test_tick_sync_hands_over_exactly_the_announced_statuses_in_order():
     assert [(s.robot, s.seq) for s in sts] == [(1, 1), (1, 2), (2, 1), (2, 2), (5, 1)]
     left, joined, sts = sync.take(Clock(tick=2, agents=[2], status_seqs=[3]))
     assert left == [1, 5] and joined == [] and [(s.robot, s.seq) for s in sts] == [(2, 3)]
+    # a live robot is in no roster (it moves in real time): its statuses and liveliness
+    # changes are handed over at the next boundary as they came
+    sync.add_status(Status(robot=9, seq=4, live=True))
+    sync.add_alive(9, True)
+    sync.add_alive(7, True)                       # a virtual robot's token: the roster rules
+    left, joined, sts = sync.take(Clock(tick=3, agents=[2], status_seqs=[3]))
+    assert left == [] and joined == [9] and [(s.robot, s.seq) for s in sts] == [(9, 4)]
 
 
 def test_new_fields_are_optional_on_the_wire():

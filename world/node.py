@@ -135,6 +135,8 @@ class WorldNode:
         self.ack_ops: list = []                # spawns/removes of the ack, next boundary
         self.via_ack: set = set()              # ("spawn"|"remove", rid) applied from an ack
         self.coord_timeouts = 0
+        self.coord_wait_s = 0.0               # wall time ticks waited on the ack alone
+        self._t_answered = self._t_acked = None
         self.await_coordinator_s = float(await_coordinator_s)
         self._clock_bytes = b""
 
@@ -288,6 +290,7 @@ class WorldNode:
             self.ack_ops.append((op, fresh and self.lockstep))
         if fresh:
             self.acked = m.tick
+            self._t_acked = time.monotonic()
             if not self.coord_in and self.coord_present and self.lockstep:
                 self.coord_in = True
                 self.log.info("tick %d: the coordinator is back in the barrier", self.tick)
@@ -322,6 +325,8 @@ class WorldNode:
                 if (self.gate.answer(rid, m.tick) and m.status_seq >= 0
                         and rid in self.gate.expected):
                     self.status_seq[rid] = m.status_seq
+                if self._t_answered is None and self.gate.all_answered():
+                    self._t_answered = time.monotonic()
 
     def _on_twin(self, key: str, payload: bytes) -> None:
         rid = self.keys.robot_id(key)
@@ -419,6 +424,10 @@ class WorldNode:
                                      "it takes part once it answers (not repeatable)",
                                      self.tick, rid, JOIN_TIMEOUT_S)
             self.joined |= self.gate.answered & set(self.joins)
+            if self._t_acked is not None:
+                self.coord_wait_s += max(0.0, self._t_acked - (self._t_answered
+                                                               or self.gate.opened))
+            self._t_answered = self._t_acked = None
             if self.coord_in and self.acked < self.tick:
                 self.coord_in = False
                 self.coord_timeouts += 1
@@ -619,7 +628,8 @@ class WorldNode:
     def summary(self) -> dict:
         return {"ticks": self.tick, "t": self.tick * self.dt, "robots": len(self.physics.ids),
                 "invalid": dict(self.rx.invalid), "dropped": dict(self.drops),
-                "late": self.late_total, "coordinator_timeouts": self.coord_timeouts}
+                "late": self.late_total, "coordinator_timeouts": self.coord_timeouts,
+                "coordinator_wait_s": round(self.coord_wait_s, 3)}
 
 
 def build_parser() -> argparse.ArgumentParser:
