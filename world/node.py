@@ -136,6 +136,7 @@ class WorldNode:
         self.via_ack: set = set()              # ("spawn"|"remove", rid) applied from an ack
         self.coord_timeouts = 0
         self.coord_wait_s = 0.0               # wall time ticks waited on the ack alone
+        self.join_wait_s = 0.0                # wall time of ticks waiting for a new agent
         self._t_answered = self._t_acked = None
         self.await_coordinator_s = float(await_coordinator_s)
         self._clock_bytes = b""
@@ -424,6 +425,8 @@ class WorldNode:
                                      "it takes part once it answers (not repeatable)",
                                      self.tick, rid, JOIN_TIMEOUT_S)
             self.joined |= self.gate.answered & set(self.joins)
+            if self.gate.expected & set(self.joins):
+                self.join_wait_s += time.monotonic() - self.gate.opened
             if self._t_acked is not None:
                 self.coord_wait_s += max(0.0, self._t_acked - (self._t_answered
                                                                or self.gate.opened))
@@ -629,7 +632,8 @@ class WorldNode:
         return {"ticks": self.tick, "t": self.tick * self.dt, "robots": len(self.physics.ids),
                 "invalid": dict(self.rx.invalid), "dropped": dict(self.drops),
                 "late": self.late_total, "coordinator_timeouts": self.coord_timeouts,
-                "coordinator_wait_s": round(self.coord_wait_s, 3)}
+                "coordinator_wait_s": round(self.coord_wait_s, 3),
+                "join_wait_s": round(self.join_wait_s, 3)}
 
 
 def build_parser() -> argparse.ArgumentParser:
