@@ -9,8 +9,9 @@ its body pose (Pose, source "agent", on robot/N/pose).
 Tasks: a Sense with task_id >= 0 (lockstep, coordinator in the barrier) says which task the
 coordinator sent last before that tick: the agent applies its tasks up to that one, in
 order, before it steps (waiting up to TASK_WAIT_S for one still in flight), and keeps later
-ones for a later tick. Otherwise tasks apply as they arrive. Holds the liveliness token alive/robot/N. Steering uses bearings,
-identities, touch and tasks only (agents/behaviours.py); the pose is never read by it.
+ones for a later tick. Otherwise tasks apply as they arrive. Holds the liveliness token
+alive/robot/N. Steering uses bearings, identities, touch and tasks only
+(agents/behaviours.py); the pose is never read by it.
 
 Parameters: defaults < the run config (``--run-config FILE``, else the world's config from
 a world/info query bounded by ``--info-timeout``) < ``--kind/--v-max/--param NAME=VALUE``.

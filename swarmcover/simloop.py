@@ -192,7 +192,8 @@ class SimLoop:
             every = self.status_every or self.agent_params.status_every
             for k, rid in enumerate(ids):
                 beh = self.agents.get(rid)
-                if beh is None or (rid not in self.roster and self.joins.get(rid, 1 << 62) > self.tick):
+                joining = self.joins.get(rid, 1 << 62) <= self.tick
+                if beh is None or (rid not in self.roster and not joining):
                     continue
                 if rid in self.joins:   # its first tick: the agent's start-up status
                     self._statuses.append(self._status(rid, beh, 0.0, -1))

@@ -31,7 +31,8 @@ its next ack of a current tick. ``--await-coordinator S`` holds tick 0 until a c
 is present (``run`` sets it), so the first tick it sees is tick 0.
 
 Spawn/Remove (world/spawn, world/remove) are applied at the next tick boundary, in arrival
-order (a Spawn or Remove the coordinator also listed in an ack is applied once). Twins (Spawn.live) follow TwinCmd (world-frame velocity or teleport) and ignore
+order (a Spawn or Remove the coordinator also listed in an ack is applied once). Twins
+(Spawn.live) follow TwinCmd (world-frame velocity or teleport) and ignore
 CmdVel (which the hwbridge consumes on the same key). Bad input is dropped, counted and
 logged once per sender; the world never stalls on it. World/info is a queryable serving
 WorldInfo with the resolved config. Liveliness token: alive/world/main.
