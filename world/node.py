@@ -63,8 +63,11 @@ from .physics import Physics
 from .sensing import Sensors
 
 ABSURD_FACTOR = 10.0   # commands faster than this times the limit are dropped, not clamped
-JOIN_S = 1.0           # lockstep barrier: a spawned body's agent takes part this many sim
-                       # seconds after the body appears (its process starts meanwhile)
+JOIN_S = 0.05          # lockstep barrier: a spawned body's agent takes part this many sim
+                       # seconds (at least one tick) after the body appears; that tick waits
+                       # for its process to start. 1.0 s cost idle ticks, not less wall time,
+                       # and more cycles (corridor_doors seed 0 in-process: > 64 cycles and
+                       # 940 s sim unfinished, against 103 cycles and 859 s at one tick)
 JOIN_TIMEOUT_S = 30.0  # wall seconds a joining tick waits for a new agent's first command
 COORD_TIMEOUT_S = 60.0  # wall seconds a tick waits for the coordinator's ack
 
