@@ -2,10 +2,16 @@
 
 Subscribes to its Sense (robot/N/sense), Task (robot/N/task) and body pose (robot/N/odom,
 telemetry only); publishes one CmdVel per Sense (same tick, at once: a lockstep world waits
-for it), its Status (every ``status_every`` Sense ticks, on every state/task change, and
-once a second while no Sense arrives) and the relay of its body pose (Pose, source "agent",
-on robot/N/pose). Holds the liveliness token alive/robot/N. Steering uses bearings,
-identities, touch and tasks only (agents/behaviours.py); the pose is never read by it.
+for it), its Status (every ``status_every`` Sense ticks and on every state/task change,
+stamped with the tick, published before the tick's CmdVel, whose status_seq names it; once
+at start; and, except in lockstep, once a second while no Sense arrives) and the relay of
+its body pose (Pose, source "agent", on robot/N/pose).
+Tasks: a Sense with task_id >= 0 (lockstep, coordinator in the barrier) says which task the
+coordinator sent last before that tick: the agent applies its tasks up to that one, in
+order, before it steps (waiting up to TASK_WAIT_S for one still in flight), and keeps later
+ones for a later tick. Otherwise tasks apply as they arrive. Holds the liveliness token
+alive/robot/N. Steering uses bearings, identities, touch and tasks only
+(agents/behaviours.py); the pose is never read by it.
 
 Parameters: defaults < the run config (``--run-config FILE``, else the world's config from
 a world/info query bounded by ``--info-timeout``) < ``--kind/--v-max/--param NAME=VALUE``.
@@ -29,6 +35,7 @@ from .behaviours import Behaviour
 from .params import ROBOT_KINDS, AgentParams, ParamError, from_toml_text, parse_override
 
 HEARTBEAT_S = 1.0
+TASK_WAIT_S = 2.0    # wall seconds a Sense waits for the task it announces
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -75,6 +82,24 @@ def query_world_info(session, keys: Keys, timeout: float, stop: Shutdown,
     return None
 
 
+def world_mode(args, session, keys: Keys, stop: Shutdown, log: logging.Logger) -> str | None:
+    """The run's clock mode ("lockstep"/"realtime") from the run config or the world, None
+    if unknown. Lockstep agents send no wall-clock heartbeats (they would make the
+    coordinator's input depend on timing)."""
+    try:
+        if args.run_config:
+            import tomllib
+            from world.config import WorldConfig
+            raw = tomllib.loads(Path(args.run_config).read_text())
+            return str(raw.get("world", {}).get("mode", WorldConfig().mode))
+        if args.info_timeout > 0:
+            info = query_world_info(session, keys, args.info_timeout, stop, log)
+            return info.mode if info is not None else None
+    except Exception as e:  # the parameters' loader reports a bad config
+        log.debug("clock mode unknown: %s", e)
+    return None
+
+
 def resolve_params(args, session, keys: Keys, stop: Shutdown,
                    log: logging.Logger) -> AgentParams:
     """Parameters from the run config or the world, then the CLI. Raises ParamError."""
@@ -109,9 +134,10 @@ class AgentNode:
     """The process loop around a :class:`Behaviour`: decode, step, publish."""
 
     def __init__(self, session, keys: Keys, rid: int, params: AgentParams, live: bool,
-                 log: logging.Logger):
+                 log: logging.Logger, lockstep: bool = False):
         self.session, self.keys, self.rid, self.p, self.live, self.log = (
             session, keys, rid, params, live, log)
+        self.lockstep = lockstep
         self.beh = Behaviour(params, rid)
         self.rx = Receiver(log)
         self.mailbox = Mailbox()
@@ -127,6 +153,12 @@ class AgentNode:
         self.last_status = 0.0
         self.last_tick: int | None = None
         self.last_cmd: bytes | None = None
+        self.barrier: bool | None = None     # None until the first Sense says
+        self.tasks: list[list] = []          # received, not applied yet: [task, senses seen]
+        self.applied: list[int] = []         # ids of the last tasks applied
+        self.held: Sense | None = None       # a Sense waiting for its announced task
+        self.held_since = 0.0
+        self.task_waits = 0
 
     def open(self) -> None:
         s, k = self.session, self.keys
@@ -157,10 +189,10 @@ class AgentNode:
             self.rx._logged.add(key)
             self.log.warning("dropping a message on %s: %s (further ones are counted)", key, why)
 
-    def publish_status(self) -> None:
+    def publish_status(self, tick: int = -1) -> None:
         self.seq += 1
         st = Status(robot=self.rid, seq=self.seq, t=self.last_t, kind=self.p.kind,
-                    live=self.live, pose=self.last_pose, **self.beh.status())
+                    live=self.live, pose=self.last_pose, tick=tick, **self.beh.status())
         self.pub_status.put(st.encode())
         self.beh.changed = False
         self.last_status = time.monotonic()
@@ -187,8 +219,9 @@ class AgentNode:
                 if msg.robot != self.rid:
                     self._invalid(key, f"Task.robot {msg.robot} is not {self.rid}")
                     continue
-                if self.beh.on_task(msg):
-                    self.log.info("task %d: %s vertex %d", msg.task_id, msg.kind, msg.vertex)
+                self.tasks.append([msg, 0])
+                if not self.barrier:  # no barrier (or no Sense yet): apply it now
+                    self._apply_tasks(len(self.tasks))
             elif key == self.k_odom:
                 msg = self.rx.decode(key, payload, Pose)
                 if msg is None:
@@ -198,13 +231,59 @@ class AgentNode:
                              source="agent")
                 self.pub_pose.put(relay.encode())
         if sense is not None:
+            if self.held is not None and sense.tick != self.held.tick:
+                self.skipped += 1
+            self.held = None
             self.tick(sense)
+        elif self.held is not None:
+            self.tick(self.held)
+
+    def _apply_tasks(self, n: int) -> None:
+        """Apply the first ``n`` received tasks, in order."""
+        todo, self.tasks = self.tasks[:n], self.tasks[n:]
+        for msg, _ in todo:
+            self.applied = (self.applied + [msg.task_id])[-16:]
+            if self.beh.on_task(msg):
+                self.log.info("task %d: %s vertex %d", msg.task_id, msg.kind, msg.vertex)
+
+    def _tasks_for(self, sense: Sense) -> bool:
+        """Apply the tasks due at this Sense; False if its announced task is still in
+        flight (the Sense is held)."""
+        self.barrier = sense.task_id >= 0
+        if not self.barrier:
+            self._apply_tasks(len(self.tasks))
+            return True
+        ids = [t.task_id for t, _ in self.tasks]
+        n = 0
+        if sense.task_id > 0 and sense.task_id not in self.applied:
+            if sense.task_id in ids:
+                n = ids.index(sense.task_id) + 1
+            else:
+                wall = time.monotonic()
+                if self.held is None or self.held.tick != sense.tick:
+                    self.held, self.held_since = sense, wall
+                if wall - self.held_since < TASK_WAIT_S:
+                    return False
+                self.task_waits += 1
+                self.log.warning("tick %d: task %d announced but not received within %.0f s: "
+                                 "stepping without it (not repeatable)", sense.tick,
+                                 sense.task_id, TASK_WAIT_S)
+        # a task no Sense announced after two ticks was sent outside the barrier
+        for k in range(n, len(self.tasks)):
+            self.tasks[k][1] += 1
+            if self.tasks[k][1] > 2:
+                n = k + 1
+        self._apply_tasks(n)
+        self.held = None
+        return True
 
     def tick(self, sense: Sense) -> None:
         if sense.tick == self.last_tick and self.last_cmd is not None:
             # the world re-sent a tick we answered (lost reply?): answer again, don't re-step
             self.pub_cmd.put(self.last_cmd)
             self.skipped += 1
+            return
+        if not self._tasks_for(sense):
             return
         try:
             cmd = self.beh.step(sense)
@@ -213,16 +292,18 @@ class AgentNode:
             if self.errors == 1:
                 self.log.exception("behaviour error at tick %d (robot stops)", sense.tick)
             cmd = None
-        out = CmdVel(robot=self.rid, tick=sense.tick)
+        self.ticks += 1
+        self.last_t = sense.t
+        if self.beh.changed or self.ticks % self.p.status_every == 0:
+            self.publish_status(sense.tick)
+        # after the tick's status: its seq tells a lockstep world (and so the coordinator)
+        # which statuses this tick produced
+        out = CmdVel(robot=self.rid, tick=sense.tick, status_seq=self.seq)
         if cmd is not None:
             out.vx, out.vy, out.wz = cmd.vx, cmd.vy, cmd.wz
         self.last_cmd = out.encode()
         self.last_tick = sense.tick
         self.pub_cmd.put(self.last_cmd)
-        self.ticks += 1
-        self.last_t = sense.t
-        if self.beh.changed or self.ticks % self.p.status_every == 0:
-            self.publish_status()
 
     def stop_robot(self) -> None:
         try:
@@ -253,7 +334,8 @@ def main(argv: list[str] | None = None) -> int:
                 return 2
             if stop.is_set():
                 return 0
-            node = AgentNode(session, keys, args.id, params, args.live, log)
+            lockstep = world_mode(args, session, keys, stop, log) == "lockstep"
+            node = AgentNode(session, keys, args.id, params, args.live, log, lockstep=lockstep)
             node.open()
             node.publish_status()
             print(f"READY agent {args.id} kind={params.kind}", flush=True)
@@ -262,18 +344,19 @@ def main(argv: list[str] | None = None) -> int:
             parent = args.parent_pid
             mb = node.mailbox
             while not stop.is_set():
-                item = mb.get(timeout=0.2)
-                if item is not None:
-                    node.handle([item] + mb.drain())
+                item = mb.get(timeout=0.2 if node.held is None else 0.02)
+                if item is not None or node.held is not None:
+                    node.handle(([item] if item is not None else []) + mb.drain())
                 if parent is not None and os.getppid() != parent:
                     log.warning("parent %d is gone: stopping", parent)
                     break
-                if time.monotonic() - node.last_status > HEARTBEAT_S:
+                if not node.lockstep and time.monotonic() - node.last_status > HEARTBEAT_S:
                     node.publish_status()
             node.stop_robot()
             log.info("robot %d stopped: %d ticks, %d skipped or repeated, %d invalid messages, "
-                     "%d behaviour errors", args.id, node.ticks, node.skipped,
-                     node.rx.invalid_total, node.errors)
+                     "%d behaviour errors, %d ticks without an announced task", args.id,
+                     node.ticks, node.skipped, node.rx.invalid_total, node.errors,
+                     node.task_waits)
         finally:
             if node is not None:
                 node.close()

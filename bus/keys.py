@@ -50,7 +50,10 @@ TOPICS: tuple[Topic, ...] = (
           "proportional sync of a live robot's twin to its mocap pose"),
     Topic("coord/complex", "Complex", "coordinator", "run, viewers, recorders", "BLOCK",
           "per-cycle Rips complex, frontier K, obstacle O, certificate, redundant set"),
-    Topic("world/clock", "Clock", "world", "all", "DROP", "simulation time and tick"),
+    Topic("coord/ack", "CoordAck", "coordinator", "world", "BLOCK",
+          "lockstep: a tick's tasks, spawns and removes are out; the world waits for it"),
+    Topic("world/clock", "Clock", "world", "all", "DROP (lockstep: BLOCK)",
+          "simulation time and tick; lockstep: the roster and the statuses of the tick"),
     Topic("world/truth", "Truth", "world", "run, viewers, recorders", "DROP",
           "ground-truth poses, every tick (never used by agents)"),
     Topic("world/spawn", "Spawn", "coordinator, run", "world, run", "BLOCK",
@@ -102,6 +105,10 @@ class Keys:
     @property
     def complex(self) -> str:
         return f"{self.prefix}/coord/complex"
+
+    @property
+    def coord_ack(self) -> str:
+        return f"{self.prefix}/coord/ack"
 
     @property
     def clock(self) -> str:

@@ -131,6 +131,14 @@ def f_ints(lo: int = -(2**62), hi: int = 2**62, optional: bool = False):
                                                  "hi": hi, "optional": optional})
 
 
+def optional(f):
+    """Mark a field added after version 1 of its message: a sender that predates it may
+    leave it out, and it decodes to its default (the wire contract stays backward
+    compatible). The same as the field maker's ``optional=True``."""
+    f.metadata = {**f.metadata, "optional": True}
+    return f
+
+
 def f_bools(optional: bool = False):
     def check(v):
         out = _list(v)
@@ -187,6 +195,7 @@ class Message:
     _FIELDS: ClassVar[tuple] = ()
     _SAME_LEN: ClassVar[tuple] = ()  # groups of list fields that must have equal lengths
     _META: ClassVar[dict] = {}       # field name -> {"kind", bounds, choices} (schemas, tests)
+    _OPTIONAL: ClassVar[dict] = {}   # field name -> default factory, for fields a sender may omit
 
     def encode(self) -> bytes:
         return encode(self)
@@ -213,6 +222,9 @@ def message(tag: str, version: int = 1, same_len: tuple = ()):
         cls._SAME_LEN = same_len
         cls._FIELDS = tuple((f.name, f.metadata["check"]) for f in dataclasses.fields(cls))
         cls._META = {f.name: dict(f.metadata) for f in dataclasses.fields(cls)}
+        cls._OPTIONAL = {f.name: (f.default_factory if f.default_factory is not dataclasses.MISSING
+                                  else (lambda v=f.default: v))
+                         for f in dataclasses.fields(cls) if f.metadata.get("optional")}
         if tag in REGISTRY:
             raise RuntimeError(f"duplicate message tag {tag}")
         REGISTRY[tag] = cls
@@ -239,8 +251,9 @@ def _validate_into(cls, d: dict, target=None):
     vals = {}
     for name, check in cls._FIELDS:
         if name not in d:
-            if cls._META[name].get("optional"):
-                continue                      # the dataclass default applies
+            if name in cls._OPTIONAL:
+                vals[name] = cls._OPTIONAL[name]()
+                continue
             raise WireError(cls.TAG, name, "missing")
         try:
             vals[name] = check(d[name])
@@ -319,6 +332,10 @@ class Sense(Message):
     back_bearings: list = f_floats(**ANGLE)
     touch: list = f_floats(**ANGLE)
     touch_robot: list = f_bools()
+    # lockstep with the coordinator in the barrier: the id of the last task the coordinator
+    # sent this robot before this tick (0: none yet); the agent applies its tasks up to that
+    # one before it steps. -1: no barrier, tasks apply as they arrive.
+    task_id: int = optional(f_int(-1, default=-1))
 
 
 @message("CmdVel")
@@ -333,6 +350,10 @@ class CmdVel(Message):
     vx: float = f_float(-_ABSURD_SPEED, _ABSURD_SPEED)
     vy: float = f_float(-_ABSURD_SPEED, _ABSURD_SPEED)
     wz: float = f_float(-_ABSURD_SPEED, _ABSURD_SPEED)
+    # seq of the last Status the agent published before this command (-1: unknown); the
+    # lockstep world announces it in the next Clock, so the coordinator knows which
+    # statuses belong to the tick
+    status_seq: int = optional(f_int(-1, default=-1))
 
 
 @message("Pose")
@@ -374,6 +395,7 @@ class Status(Message):
     contact: bool = f_bool()
     contact_bearing: float = f_float(**ANGLE)
     pose: list = f_floats(-1e6, 1e6)
+    tick: int = optional(f_int(-1, default=-1))   # the Sense tick it answers; -1: none
 
     def _post_check(self):
         if len(self.pose) not in (0, 3):
@@ -477,13 +499,39 @@ class Complex(Message):
                 raise WireError(self.TAG, name, f"edge index {bad[0]} >= {m} edges")
 
 
-@message("Clock")
+@message("Clock", same_len=(("agents", "status_seqs"),))
 class Clock(Message):
-    """World -> all: simulation time. rtf: measured real-time factor (sim s per wall s)."""
+    """World -> all: simulation time. rtf: measured real-time factor (sim s per wall s).
+
+    Lockstep: agents/status_seqs are the world's roster at this tick boundary (robot ids
+    whose agents take part, sorted) and, per agent, the seq of the last Status it published
+    before answering the previous tick: the statuses the coordinator must act on now.
+    """
     tick: int = f_int(0)
     t: float = f_float(0.0)
     mode: str = f_str(("realtime", "lockstep"), default="realtime")
     rtf: float = f_float(0.0, 1e6)
+    agents: list = optional(f_ints(0))
+    status_seqs: list = optional(f_ints(-1))
+
+
+@message("CoordAck", same_len=(("task_robots", "task_ids"),
+                               ("spawn_ids", "spawn_sources", "spawn_live", "spawn_kinds")))
+class CoordAck(Message):
+    """Coordinator -> world (lockstep): tick ``tick``'s decisions are out.
+
+    The world applies the listed spawns and removes at the next tick boundary, in this
+    order, and tells each robot in its next Sense the last task sent to it
+    (task_robots[i] got task task_ids[i]).
+    """
+    tick: int = f_int(0)
+    task_robots: list = f_ints(0)
+    task_ids: list = f_ints(0)
+    spawn_ids: list = f_ints(0)
+    spawn_sources: list = f_ints(0, 1000)
+    spawn_live: list = f_bools()
+    spawn_kinds: list = f_ints(0, len(ROBOT_KINDS) - 1)   # index into ROBOT_KINDS
+    remove_ids: list = f_ints(0)
 
 
 @message("Spawn")

@@ -5,6 +5,16 @@ liveliness changes and the world clock, advances the deployer at simulated time,
 publishes the tasks, spawn/remove requests and the per-cycle complex it asks for. All
 timeouts are in simulated seconds, so a slow lockstep run never times out spuriously.
 A restarted coordinator rebuilds its state from the agents' statuses and resumes.
+
+Lockstep: the coordinator is part of the world's barrier, so a run is repeatable. At each
+Clock (tick k, sim time t_k) it applies the roster's changes (agents that joined or left),
+then exactly the statuses the Clock announces (per agent, those up to the seq its command of
+tick k-1 reported; it waits for any still in flight), sorted by (robot, seq), steps the
+deployer at t_k, publishes its tasks, spawns and removes, and acks tick k on coord/ack
+(CoordAck, listing them). Nothing depends on when a message arrived.
+Realtime: it acts on what has arrived, at the world's clock.
+The clock is trusted only when it moves forward by plausible steps (:class:`ClockTrust`): a
+forged jump is ignored and counted, so no single packet can freeze the deployer's time.
 """
 from __future__ import annotations
 
@@ -17,7 +27,7 @@ import time
 import zenoh
 
 from bus.keys import Keys
-from bus.messages import Clock, Complex, Status, WorldInfo
+from bus.messages import ROBOT_KINDS, Clock, Complex, CoordAck, Status, WorldInfo
 from bus.session import (Mailbox, Receiver, Shutdown, add_zenoh_args, keys_from_args,
                          open_session, publisher, setup_logging)
 from bus.trust import SignedPublisher, key_from_env
@@ -26,6 +36,119 @@ from .config import CoordinatorConfig
 from .deployer import Deployer
 
 log = logging.getLogger("swarmcover.coordinator")
+STATUS_WAIT_S = 5.0   # lockstep: wall seconds to wait for statuses a Clock announced
+
+
+class ClockTrust:
+    """Accepts a world Clock only if it is consistent (t = tick * dt) and moves forward by a
+    plausible step from the last accepted one: at most ``1 + max_rate * wall seconds
+    elapsed`` ticks. A clock that fails is ignored (``rejected`` counts them). Should the
+    first accepted clock itself have been forged, ``rebase_after`` consecutive clocks that
+    are plausible among themselves (a live world) replace it. Pure: wall times are passed in.
+    """
+
+    def __init__(self, dt: float | None, max_rate: float = 2000.0, rebase_after: int = 20):
+        self.dt = dt
+        self.max_rate = float(max_rate)
+        self.rebase_after = int(rebase_after)
+        self.tick: int | None = None
+        self.wall = 0.0
+        self.rejected = 0
+        self._chain: list[tuple[int, float]] = []
+
+    def _plausible(self, tick: int, wall: float, ref_tick: int, ref_wall: float) -> bool:
+        return ref_tick < tick <= ref_tick + 1 + self.max_rate * max(0.0, wall - ref_wall)
+
+    def check(self, clk: Clock, wall: float) -> str:
+        """'new' (accepted, later than before), 'same' (the last tick again) or 'bad'."""
+        if self.dt is not None and abs(clk.t - clk.tick * self.dt) > 1e-6 * max(1.0, clk.t):
+            self.rejected += 1
+            return "bad"
+        if self.tick is None or self._plausible(clk.tick, wall, self.tick, self.wall):
+            self.tick, self.wall = clk.tick, wall
+            self._chain = []
+            return "new"
+        if clk.tick == self.tick:
+            return "same"
+        self.rejected += 1
+        ch = self._chain
+        if ch and not self._plausible(clk.tick, wall, *ch[-1]):
+            ch.clear()
+        ch.append((clk.tick, wall))
+        if len(ch) >= self.rebase_after:
+            log.warning("clock: %d consecutive clocks disagree with tick %d: following them",
+                        len(ch), self.tick)
+            self.tick, self.wall = clk.tick, wall
+            ch.clear()
+            return "new"
+        return "bad"
+
+
+class TickSync:
+    """Lockstep book-keeping of the coordinator's half of the barrier (pure, no I/O).
+
+    ``add_status`` buffers statuses as they arrive; ``missing(clk)`` says which robots'
+    announced statuses have not arrived yet; ``take(clk)`` returns the tick's roster changes
+    and its statuses in (robot, seq) order, and forgets them. Live robots (Status.live) move
+    in real time and are in no roster: their statuses and liveliness changes
+    (``add_alive``) are handed over at the next boundary as they came.
+    """
+
+    def __init__(self):
+        self.buf: dict[int, list[Status]] = {}
+        self.have: dict[int, int] = {}      # rid -> highest seq received
+        self.done: dict[int, int] = {}      # rid -> highest seq handed to the deployer
+        self.roster: set[int] = set()
+        self.first = True
+        self.live: set[int] = set()         # robots that reported live = true
+        self.alive_events: list[tuple[int, bool]] = []
+
+    def add_alive(self, rid: int, present: bool) -> None:
+        """A liveliness change; only live robots' count (the roster stands for the rest)."""
+        if rid in self.live:
+            self.alive_events.append((rid, present))
+
+    def add_status(self, st: Status) -> None:
+        if st.live:
+            self.live.add(st.robot)
+        b = self.buf.setdefault(st.robot, [])
+        if len(b) >= 1000:
+            b.pop(0)
+        b.append(st)
+        self.have[st.robot] = max(self.have.get(st.robot, 0), st.seq)
+
+    def missing(self, clk: Clock) -> list[int]:
+        if self.first:
+            return []   # a (re)started coordinator cannot have what was sent before it
+        return [r for r, s in zip(clk.agents, clk.status_seqs)
+                if s > self.done.get(r, 0) and self.have.get(r, 0) < s]
+
+    def take(self, clk: Clock) -> tuple[list[int], list[int], list[Status]]:
+        """(left, joined, statuses) of this boundary."""
+        now = set(clk.agents)
+        left, joined = sorted(self.roster - now), sorted(now - self.roster)
+        for rid, present in self.alive_events:
+            (joined if present else left).append(rid)
+        self.alive_events = []
+        for r in left:
+            if r not in self.live:
+                self.buf.pop(r, None)
+        seqs = dict(zip(clk.agents, clk.status_seqs))
+        for r in self.live - now:
+            if self.buf.get(r):
+                seqs[r] = self.buf[r][-1].seq
+        out: list[Status] = []
+        for r, s in sorted(seqs.items()):
+            b = self.buf.get(r)
+            if not b:
+                continue
+            lo = self.done.get(r, 0)
+            out += sorted((st for st in b if lo < st.seq <= s), key=lambda st: st.seq)
+            self.buf[r] = [st for st in b if st.seq > s]
+            self.done[r] = max(lo, s)
+        self.roster = now
+        self.first = False
+        return left, joined, out
 
 
 def robot_kinds_from_config(cfg) -> callable:
@@ -111,6 +234,10 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
     dep = Deployer(ccfg, sources=headings, epoch=epoch, robot_kind=robot_kinds_from_config(cfg),
                    robot_radius=cfg.robots.radius)
 
+    lockstep = ((info.mode if info is not None else cfg.world.mode) == "lockstep")
+    dt = info.dt if info is not None else cfg.world.dt
+    trust = ClockTrust(dt, max_rate=max(2000.0, 4.0 * cfg.world.rtf / dt))
+    sync = TickSync()
     rx = Receiver(log)
     mb = Mailbox()
     subs = [
@@ -124,12 +251,19 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
     pub_complex = SignedPublisher(publisher(session, keys.complex), run_key)
     pub_spawn = SignedPublisher(publisher(session, keys.spawn), run_key)
     pub_remove = publisher(session, keys.remove)
+    pub_ack = publisher(session, keys.coord_ack)
     task_pubs: dict[int, zenoh.Publisher] = {}
     now = 0.0
     clocked = False
+    clocks: list[Clock] = []      # lockstep: accepted clocks not yet handled, in order
+    wait_since: float | None = None
+    last_ack: tuple[int, bytes] | None = None
+    status_waits = 0
+    busy_s, ticks = 0.0, 0
     print(f"READY coordinator epoch {epoch} zid {session.zid()}", flush=True)
-    log.info("coordinator up: swarm %s, rv %.2f, %d source(s), push_mode %s", keys.swarm,
-             ccfg.rv, len(headings), ccfg.push_mode)
+    log.info("coordinator up: swarm %s, rv %.2f, %d source(s), push_mode %s, %s", keys.swarm,
+             ccfg.rv, len(headings), ccfg.push_mode,
+             "lockstep (in the world's barrier)" if lockstep else "realtime")
     rc = 0
 
     def decode(key: str, rel: str, payload: bytes):
@@ -143,60 +277,137 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
             return None
         return msg
 
+    def on_clock(clk: Clock) -> str:
+        verdict = trust.check(clk, time.monotonic())
+        if verdict == "bad" and trust.rejected == 1:
+            log.warning("ignoring a clock that does not follow the world's (tick %d, t %.3f; "
+                        "last tick %s): further ones are counted", clk.tick, clk.t, trust.tick)
+        return verdict
+
+    def execute(actions, tick: int | None) -> None:
+        nonlocal rc
+        ack = CoordAck(tick=max(tick or 0, 0))
+        for action in actions:
+            what = action[0]
+            if what == "task":
+                _, rid, task = action
+                pub = task_pubs.get(rid)
+                if pub is None:
+                    pub = task_pubs[rid] = publisher(session, keys.task(rid))
+                pub.put(task.encode())
+                ack.task_robots.append(rid)
+                ack.task_ids.append(task.task_id)
+            elif what == "spawn":
+                sp = action[1]
+                log.info("spawning robot %d at source %d", sp.robot, sp.source)
+                pub_spawn.put(sp.encode())
+                ack.spawn_ids.append(sp.robot)
+                ack.spawn_sources.append(sp.source)
+                ack.spawn_kinds.append(ROBOT_KINDS.index(sp.kind))
+                ack.spawn_live.append(sp.live)
+            elif what == "remove":
+                pub_remove.put(action[1].encode())
+                ack.remove_ids.append(action[1].robot)
+            elif what == "complex":
+                cx: Complex = action[1]
+                pub_complex.put(cx.encode())
+                log.info("cycle %d: robots %d, complex %d vertices / %d edges / %d "
+                         "triangles, frontier %d, obstacle %d, redundant %d, certified %s",
+                         cx.cycle, cx.robots, len(cx.vertices), len(cx.edges) // 2,
+                         len(cx.triangles) // 3, len(cx.frontier), len(cx.obstacle),
+                         len(cx.redundant), cx.certified)
+            elif what == "done":
+                log.info("done: %s", dep.summary())
+                print(f"DONE certified={action[1]}", flush=True)
+                if args.exit_on_done:
+                    stop.set()
+                rc = 0 if action[1] else 1
+        if tick is not None:
+            nonlocal last_ack
+            last_ack = (tick, ack.encode())
+            pub_ack.put(last_ack[1])
+
+    def boundary(clk: Clock) -> None:
+        """Lockstep: the deployer's step of tick clk.tick, on that tick's roster changes
+        and statuses alone."""
+        nonlocal busy_s, ticks
+        t0 = time.monotonic()
+        left, joined, statuses = sync.take(clk)
+        for rid in left:
+            dep.on_alive(rid, False, clk.t)
+        for rid in joined:
+            dep.on_alive(rid, True, clk.t)
+        for st in statuses:
+            dep.on_status(st)
+        execute(dep.step(clk.t), clk.tick)
+        if dep.done and not args.exit_on_done:
+            dep.reopen_if_needed(clk.t)
+        busy_s += time.monotonic() - t0
+        ticks += 1
+
     try:
         while not stop.is_set():
-            item = mb.get(0.05)
+            item = mb.get(0.05 if not clocks else 0.005)
             items = ([item] if item else []) + mb.drain()
             for key, payload, kind in items:
                 rel = keys.relative(key)
                 if rel.startswith("alive/robot/"):
                     rid = keys.robot_id(key)
-                    if rid is not None:
+                    if rid is None:
+                        continue
+                    if lockstep:   # the Clock's roster, except for live robots
+                        sync.add_alive(rid, kind == zenoh.SampleKind.PUT)
+                    else:
                         dep.on_alive(rid, kind == zenoh.SampleKind.PUT, now)
                     continue
                 msg = decode(key, rel, payload)
                 if msg is None:
                     continue
-                now = max(now, msg.t)
                 if isinstance(msg, Status):
-                    dep.on_status(msg)
+                    if lockstep:
+                        sync.add_status(msg)
+                    else:
+                        dep.on_status(msg)
+                    continue
+                verdict = on_clock(msg)
+                if verdict == "bad":
+                    continue
+                clocked = True
+                if not lockstep or msg.mode != "lockstep":
+                    if verdict == "new":
+                        now = msg.t
+                elif verdict == "new":
+                    clocks.append(msg)
+                elif last_ack is not None and last_ack[0] == msg.tick:
+                    pub_ack.put(last_ack[1])   # the world re-sent it: our ack was lost
+            if lockstep:
+                while clocks and not stop.is_set():
+                    clk = clocks[0]
+                    miss = sync.missing(clk) if len(clocks) == 1 else []
+                    if miss:
+                        wall = time.monotonic()
+                        if wait_since is None:
+                            wait_since = wall
+                        if wall - wait_since < STATUS_WAIT_S:
+                            break   # the statuses are on their way
+                        status_waits += 1
+                        log.warning("tick %d: statuses of robots %s announced but not "
+                                    "received within %.0f s: going on without them (not "
+                                    "repeatable)", clk.tick, miss[:10], STATUS_WAIT_S)
+                    wait_since = None
+                    clocks.pop(0)
+                    now = clk.t
+                    boundary(clk)
+                continue
             if not clocked:
-                clocked = any(keys.relative(k) == "world/clock" for k, _, _ in items)
-                if not clocked:
-                    continue  # the deployer's time is the world's: wait for its clock
-            for action in dep.step(now):
-                what = action[0]
-                if what == "task":
-                    _, rid, task = action
-                    pub = task_pubs.get(rid)
-                    if pub is None:
-                        pub = task_pubs[rid] = publisher(session, keys.task(rid))
-                    pub.put(task.encode())
-                elif what == "spawn":
-                    log.info("spawning robot %d at source %d", action[1].robot, action[1].source)
-                    pub_spawn.put(action[1].encode())
-                elif what == "remove":
-                    pub_remove.put(action[1].encode())
-                elif what == "complex":
-                    cx: Complex = action[1]
-                    pub_complex.put(cx.encode())
-                    log.info("cycle %d: robots %d, complex %d vertices / %d edges / %d "
-                             "triangles, frontier %d, obstacle %d, redundant %d, certified %s",
-                             cx.cycle, cx.robots, len(cx.vertices), len(cx.edges) // 2,
-                             len(cx.triangles) // 3, len(cx.frontier), len(cx.obstacle),
-                             len(cx.redundant), cx.certified)
-                elif what == "done":
-                    log.info("done: %s", dep.summary())
-                    print(f"DONE certified={action[1]}", flush=True)
-                    if args.exit_on_done:
-                        stop.set()
-                    rc = 0 if action[1] else 1
+                continue  # the deployer's time is the world's: wait for its clock
+            execute(dep.step(now), None)
             if dep.done and not args.exit_on_done:
                 dep.reopen_if_needed(now)
     finally:
         for s in subs:
             s.undeclare()
-        for pub in list(task_pubs.values()) + [pub_complex, pub_spawn, pub_remove]:
+        for pub in list(task_pubs.values()) + [pub_complex, pub_spawn, pub_remove, pub_ack]:
             pub.undeclare()
         token.undeclare()
         # what arrived but was not handled before the stop is still accounted for: invalid
@@ -207,6 +418,13 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
                 decode(key, rel, payload)
         if rx.invalid_total:
             log.warning("dropped %d invalid messages", rx.invalid_total)
+        if trust.rejected:
+            log.warning("ignored %d implausible clocks", trust.rejected)
+        if ticks:
+            log.info("lockstep: %d ticks, %.1f s deciding (%.2f ms a tick)", ticks, busy_s,
+                     1e3 * busy_s / ticks)
+        if status_waits:
+            log.warning("%d ticks went on without announced statuses", status_waits)
     return rc
 
 

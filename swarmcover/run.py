@@ -360,6 +360,7 @@ class RunState:
     certified: bool = False
     last_cx: Complex | None = None
     last_truth: Truth | None = None
+    truths: dict = dataclasses.field(default_factory=dict)   # recent ground truth by tick
     info: WorldInfo | None = None
     spawned: int = 0
     restarts: int = 0
@@ -367,6 +368,21 @@ class RunState:
     refused: dict = dataclasses.field(default_factory=dict)  # "complex: why" -> count
     recheck: dict | None = None
     limits: dict = dataclasses.field(default_factory=dict)   # robots_max and where from
+
+    def saw_truth(self, truth: Truth | None) -> None:
+        if truth is not None:
+            self.last_truth = truth
+            self.truths[truth.tick] = truth
+            self.truths.pop(truth.tick - 400, None)
+
+    def decided_truth(self) -> Truth | None:
+        """The world at the tick of the last complex (lockstep: the same every run), not
+        wherever it had got to by the time the supervisor stopped; else the last one seen."""
+        if self.last_cx is not None:
+            at = [tr for tr in self.truths.values() if abs(tr.t - self.last_cx.t) < 1e-6]
+            if at:
+                return at[0]
+        return self.last_truth
 
     def end(self, reason: str, detail: str = "", rc: int | None = None) -> bool:
         """Record why the run ends (the first reason wins)."""
@@ -476,7 +492,8 @@ def main(argv: list[str] | None = None) -> int:
                     .wait_ready("READY router", 30)
             print(f"swarmcover run: {cfg.name} -> {out}/  (router {endpoint}, swarm {swarm})",
                   file=sys.stderr, flush=True)
-            launcher.start("world", ["world", conf_path]).wait_ready("READY world", 60)
+            launcher.start("world", ["world", conf_path, "--await-coordinator", "120"]) \
+                .wait_ready("READY world", 60)
             session = _open(endpoint, swarm)
             _supervise(args, cfg, wmap, conf_path, launcher, session, Keys(swarm), out,
                        stop, state, t_wall0, live_limits)
@@ -523,7 +540,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def _write_report(args, cfg, wmap, out: Path, state: RunState, t_wall0: float) -> dict:
     """summary.json (strict JSON, on every ending) and final.png; returns the summary."""
-    truth, cx = state.last_truth, state.last_cx
+    decided = state.certified or state.stop_reason in ("robots_max", "no_progress")
+    truth, cx = (state.decided_truth() if decided else state.last_truth), state.last_cx
     extra = dict(certified=state.certified, stop_reason=state.stop_reason,
                  stop_detail=state.detail, cycles=state.cycles,
                  sim_time_s=(truth.t if truth else 0.0),
@@ -712,7 +730,7 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                     unready[name] = 0.0
                     state.spawned += 1
                 elif rel == "world/truth":
-                    state.last_truth = rx.decode(key, payload, Truth) or state.last_truth
+                    state.saw_truth(rx.decode(key, payload, Truth))
                 elif rel == "coord/complex":
                     cx = rx.decode(key, payload, Complex)
                     if cx is None:
@@ -817,7 +835,7 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
     time.sleep(0.3)
     for key, payload, *_ in inbox.items(0.0):
         if keys.relative(key) == "world/truth":
-            state.last_truth = rx.decode(key, payload, Truth) or state.last_truth
+            state.saw_truth(rx.decode(key, payload, Truth))
 
 
 def _halt_movers(launcher: Launcher, first: tuple = ("hwbridge",),

@@ -94,14 +94,14 @@ def acl_config(n_agents: int = DEFAULT_AGENTS) -> dict:
           _publish("world-pub", [f"{P}/robot/*/sense", f"{P}/robot/*/odom",
                                  f"{P}/world/clock", f"{P}/world/truth"]),
           _read("world", [f"{P}/robot/*/cmd_vel", f"{P}/robot/*/twin_cmd",
-                          f"{P}/world/spawn", f"{P}/world/remove"]),
+                          f"{P}/world/spawn", f"{P}/world/remove", f"{P}/coord/ack"]),
           _rule("world-info-serve-decl", ["ingress"], ["declare_queryable", "reply"],
                 [f"{P}/world/info"]),
           _rule("world-info-serve-q", ["egress"], ["query"], [f"{P}/world/info"]),
           _rule("world-token", ["ingress"], ["liveliness_token"], [f"{P}/alive/world/**"]))
     grant("coordinator",
           _publish("coord-pub", [f"{P}/robot/*/task", f"{P}/coord/complex",
-                                 f"{P}/world/spawn", f"{P}/world/remove"]),
+                                 f"{P}/world/spawn", f"{P}/world/remove", f"{P}/coord/ack"]),
           _read("coord", [f"{P}/robot/*/status"]),
           _rule("coord-token", ["ingress"], ["liveliness_token"], [f"{P}/alive/coordinator/**"]))
     grant("hwbridge",

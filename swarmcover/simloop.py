@@ -1,12 +1,20 @@
 """The whole swarm in one process, in lockstep, without Zenoh: for algorithm tests and tuning.
 
-It wires the real parts together exactly as the processes do, minus the transport: the
-world's pymunk physics and emulated sensors (world.physics, world.sensing), one agent
+It wires the real parts together as the processes do, minus the transport: the world's
+pymunk physics and emulated sensors (world.physics, world.sensing), one agent
 :class:`agents.behaviours.Behaviour` per robot, and the coordinator's
 :class:`coordinator.deployer.Deployer`. Messages are the same dataclasses (Sense, Task,
-Status, Spawn, Remove, Complex), passed by reference. The distributed system is tested
-separately end to end; this loop makes the algorithm's behaviour on many maps cheap to
-check (seconds instead of minutes) and deterministic for a seed.
+Status, Spawn, Remove, Complex), passed by reference.
+
+Tick order: the same as distributed lockstep with the coordinator in the barrier (see
+world/node.py and coordinator/node.py), so both give the same run for a config and seed. At
+the boundary of tick k (sim time t_k): the spawns and removes the coordinator decided at
+k-1 are applied (a spawned body's agent joins ``join_ticks`` later); the roster changes
+(deaths, agents that answered their first tick) and the statuses the agents published while
+answering tick k-1 go to the deployer (left, joined, then statuses by (robot, seq)), which
+steps at t_k; every agent in the roster (or joining now: it first publishes its start-up
+Status) applies the tasks decided up to k-1, steps on Sense(k), and publishes its Status
+every ``status_every`` of its own ticks or on a change; then physics steps dt.
 """
 from __future__ import annotations
 
@@ -14,7 +22,6 @@ import dataclasses
 import logging
 import math
 import time
-import tomllib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -42,14 +49,15 @@ class SimLoop:
     """Lockstep simulation of world + agents + coordinator for one run config."""
 
     def __init__(self, cfg, *, seed: int | None = None, coordinator_overrides: dict | None = None,
-                 status_every: int = 4):
+                 status_every: int | None = None):
         from agents.behaviours import Behaviour
-        from agents.params import from_config as agent_params
+        from agents.params import from_toml_text
         from coordinator.config import CoordinatorConfig
         from coordinator.deployer import Deployer
         from coordinator.node import robot_kinds_from_config
         from world.config import to_toml
         from world.maps import build_map
+        from world.node import join_ticks
         from world.physics import Physics
         from world.sensing import Sensors
 
@@ -66,8 +74,9 @@ class SimLoop:
                                noise_sigma=math.radians(sc.noise_deg), dropout=sc.dropout,
                                robots_occlude=sc.robots_occlude, n_touch=sc.n_touch,
                                skin=sc.touch_skin, rng=self.rng)
-        raw = tomllib.loads(to_toml(cfg))
-        self.agent_params = agent_params(raw, source=cfg.path)
+        self.sense_every = max(1, round(1.0 / (sc.rate_hz * w.dt)))
+        # the agent processes read the resolved config's text (run --run-config): so does this
+        self.agent_params = from_toml_text(to_toml(cfg), str(cfg.path))
         self._Behaviour = Behaviour
         section = dict(cfg.section("coordinator"))
         section.update(coordinator_overrides or {})
@@ -76,72 +85,138 @@ class SimLoop:
         self.dep = Deployer(self.ccfg, sources=headings, epoch=1,
                             robot_kind=robot_kinds_from_config(cfg),
                             robot_radius=cfg.robots.radius)
-        self.agents: dict = {}
-        self.seq: dict[int, int] = {}
+        self.join_ticks = join_ticks(self.dt)
+        self.agents: dict = {}                 # rid -> Behaviour (its agent runs)
+        self.seq: dict[int, int] = {}          # rid -> last Status seq
+        self.own_ticks: dict[int, int] = {}    # rid -> ticks its agent stepped
         self.status_every = status_every
         self.tick = 0
         self.t = 0.0
         self.complexes: list[Complex] = []
         self.spawned = 0
+        self.roster: set[int] = set()          # agents taking part (the world's Clock)
+        self._coord_roster: set[int] = set()   # the roster the deployer last saw
+        self.joins: dict[int, int] = {}        # rid -> tick its agent joins
+        self._joined: set[int] = set()
+        self._gone: set[int] = set()
+        self._statuses: list[Status] = []      # published at tick k-1, for boundary k
+        self._tasks: dict[int, list] = {}      # decided up to k-1, applied at Sense(k)
+        self._ops: list = []                   # spawns/removes decided at k-1
+        self.done_t: float | None = None
 
     # ------------------------------------------------------------------ actions
-    def _apply(self, actions) -> bool:
+    def _apply(self, actions) -> tuple[bool, dict, list]:
+        """The deployer's actions of one boundary -> (done, tasks by robot, spawn/remove)."""
         done = False
+        tasks: dict[int, list] = {}
+        ops: list = []
         for a in actions:
             kind = a[0]
             if kind == "task":
-                beh = self.agents.get(a[1])
-                if beh is not None:
-                    beh.on_task(a[2])
-            elif kind == "spawn":
-                sp = a[1]
-                x, y, th = self.wm.sources[sp.source]
-                self.physics.add(sp.robot, x, y, th, sp.kind, False)
-                p = dataclasses.replace(self.agent_params, kind=sp.kind)
-                self.agents[sp.robot] = self._Behaviour(p, sp.robot)
-                self.seq[sp.robot] = 0
-                self.spawned += 1
-                self.dep.on_alive(sp.robot, True, self.t)
-            elif kind == "remove":
-                rid = a[1].robot
-                self.physics.remove(rid)
-                self.agents.pop(rid, None)
+                tasks.setdefault(a[1], []).append(a[2])
+            elif kind in ("spawn", "remove"):
+                ops.append(a)
             elif kind == "complex":
                 self.complexes.append(a[1])
             elif kind == "done":
                 done = True
-        return done
+        return done, tasks, ops
+
+    def _apply_ops(self) -> None:
+        ops, self._ops = self._ops, []
+        for kind, m in ops:
+            if kind == "spawn":
+                if self.physics.has(m.robot):
+                    continue
+                x, y, th = self.wm.sources[m.source]
+                self.physics.add(m.robot, x, y, th, m.kind, False)
+                p = dataclasses.replace(self.agent_params, kind=m.kind)
+                self.agents[m.robot] = self._Behaviour(p, m.robot)
+                self.seq[m.robot] = 0
+                self.own_ticks[m.robot] = 0
+                self.joins[m.robot] = self.tick + self.join_ticks
+                self.spawned += 1
+            else:
+                if self.physics.remove(m.robot):
+                    self.agents.pop(m.robot, None)
+                    self.roster.discard(m.robot)
+                    self.joins.pop(m.robot, None)
+                    self._tasks.pop(m.robot, None)
 
     def kill(self, rid: int) -> None:
-        """A robot fails: its agent stops, its liveliness token goes (the body stays until
-        the coordinator removes it, as in the distributed system)."""
+        """A robot fails: its agent stops and its liveliness token goes, which the world
+        reports at the next boundary (the body stays until the coordinator removes it, as
+        in the distributed system)."""
         self.agents.pop(rid, None)
-        self.dep.on_alive(rid, False, self.t)
+        self._gone.add(rid)
+
+    def _status(self, rid: int, beh, t: float, tick: int) -> Status:
+        self.seq[rid] += 1
+        return Status(robot=rid, seq=self.seq[rid], t=t, kind=beh.p.kind, tick=tick,
+                      **beh.status())
 
     # ------------------------------------------------------------------ loop
+    def _boundary(self) -> bool:
+        """Tick k's boundary: the world's roster, then the coordinator's step."""
+        self._apply_ops()
+        for rid in self._gone:
+            self.roster.discard(rid)
+            self.joins.pop(rid, None)
+        self._gone = set()
+        for rid in sorted(self._joined):
+            if self.joins.pop(rid, None) is not None:
+                self.roster.add(rid)
+        self._joined = set()
+        self.roster &= set(self.physics.ids)
+        dep = self.dep
+        for rid in sorted(self._coord_roster - self.roster):
+            dep.on_alive(rid, False, self.t)
+        for rid in sorted(self.roster - self._coord_roster):
+            dep.on_alive(rid, True, self.t)
+        self._coord_roster = set(self.roster)
+        statuses, self._statuses = self._statuses, []
+        for st in sorted(statuses, key=lambda st: (st.robot, st.seq)):
+            if st.robot in self.roster:
+                dep.on_status(st)
+        done, tasks, self._ops = self._apply(dep.step(self.t))
+        if dep.done and not done:
+            dep.reopen_if_needed(self.t)
+        return done, tasks
+
     def step(self) -> bool:
-        done = self._apply(self.dep.step(self.t))
+        done, tasks = self._boundary()
         ids, pos, th = self.physics.state()
         cmds = np.zeros((len(ids), 3))
-        if ids:
+        if ids and self.tick % self.sense_every == 0:
             b = self.sensors.sense(pos, th)
             ida = np.asarray(ids, np.int64)
+            every = self.status_every or self.agent_params.status_every
             for k, rid in enumerate(ids):
                 beh = self.agents.get(rid)
-                if beh is None:
+                joining = self.joins.get(rid, 1 << 62) <= self.tick
+                if beh is None or (rid not in self.roster and not joining):
                     continue
+                if rid in self.joins:   # its first tick: the agent's start-up status
+                    self._statuses.append(self._status(rid, beh, 0.0, -1))
+                    beh.changed = False
+                    self._joined.add(rid)
+                for task in self._tasks.pop(rid, ()):
+                    beh.on_task(task)
                 r = b.robot(k)
                 s = Sense(robot=rid, tick=self.tick, t=self.t, ids=ida[r["tgt"]].tolist(),
                           bearings=r["bearings"].tolist(), back_bearings=r["back"].tolist(),
                           touch=r["touch"].tolist(), touch_robot=r["touch_robot"].tolist())
                 c = beh.step(s)
                 cmds[k] = (c.vx, c.vy, c.wz)
-                if beh.changed or self.tick % self.status_every == 0:
+                self.own_ticks[rid] += 1
+                if beh.changed or self.own_ticks[rid] % every == 0:
+                    self._statuses.append(self._status(rid, beh, self.t, self.tick))
                     beh.changed = False
-                    self.seq[rid] += 1
-                    st = Status(robot=rid, seq=self.seq[rid], t=self.t, kind=beh.p.kind,
-                                **beh.status())
-                    self.dep.on_status(st)
+        for rid, ts in tasks.items():   # the coordinator's tasks of this tick: next Sense
+            if rid in self.agents:
+                self._tasks.setdefault(rid, []).extend(ts)
+        if done:
+            self.done_t = self.t
         self.physics.step(cmds)
         self.tick += 1
         self.t = self.tick * self.dt
@@ -173,7 +248,9 @@ class SimLoop:
                 reason = f"max_wall_s {max_wall_s}"
                 break
         ids, pos, _ = self.physics.state()
-        return SimResult(certified=self.dep.certified, cycles=self.dep.cycle, sim_time_s=self.t,
+        # sim time: when the coordinator decided (the distributed summary's sim_time_s)
+        t_end = self.done_t if self.done_t is not None else self.t
+        return SimResult(certified=self.dep.certified, cycles=self.dep.cycle, sim_time_s=t_end,
                          wall_time_s=time.monotonic() - t0, robots_spawned=self.spawned,
                          complexes=self.complexes,
                          positions={r: tuple(p) for r, p in zip(ids, pos)},

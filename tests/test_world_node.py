@@ -283,3 +283,69 @@ def test_an_agent_that_leaves_is_no_longer_waited_for(procs, router, zargs, tmp_
         if token is not None:
             token.undeclare()
         s.close()
+
+
+def test_lockstep_barrier_with_a_coordinator(procs, router, zargs, tmp_path):
+    """This test plays the coordinator and robot 0's agent. The world holds tick 0 until a
+    coordinator is present, never runs tick k+1 before the coordinator acked tick k, applies
+    an acked spawn at the next boundary, gives the new body its first Sense (with the acked
+    task's id) JOIN_TICKS later and waits for its agent there, then announces the agent and
+    its status seq in the next Clock."""
+    from bus.messages import CoordAck
+    from world.node import join_ticks
+    keys = Keys(swarm_of(zargs))
+    s = client_session(router, keys.swarm)
+    mail = Mailbox()
+    subs = [s.declare_subscriber(k, mail.callback) for k in
+            (keys.clock, keys.sense(0), keys.truth)]
+    token = agent_token = None
+    try:
+        w = procs.swarmcover("world", config(tmp_path, rtf=50.0), "--await-coordinator", 30,
+                             *zargs)
+        w.wait_line("READY world", timeout=30)
+        time.sleep(1.0)   # held at tick 0: nothing beyond it
+        seen = collect(mail, lambda ms: any(isinstance(m, Clock) for _, m in ms), 10)
+        assert {m.tick for _, m in seen if isinstance(m, (Clock, Truth))} == {0}
+        token = s.liveliness().declare_token(keys.alive("coordinator", "main"))
+        join = join_ticks(0.05)
+        spawn_tick, acked, clocks, senses, truths = 2, set(), {}, [], {}
+        held = False
+        end = time.monotonic() + 60
+        while time.monotonic() < end:
+            item = mail.get(0.05)
+            if item is None:
+                continue
+            m = decode(item[1])
+            if isinstance(m, Truth):
+                truths[m.tick] = m.ids
+            elif isinstance(m, Sense):
+                senses.append(m)
+                put(s, keys.cmd_vel(0), CmdVel(robot=0, tick=m.tick, status_seq=1))
+            elif isinstance(m, Clock) and m.tick not in acked:
+                clocks[m.tick] = m
+                assert max(clocks) <= max(acked, default=-1) + 1, "ran ahead of the ack"
+                if m.tick == 5 and not held:
+                    held = True     # a slow coordinator: the world must wait for it
+                    time.sleep(1.0)
+                    waiting = [decode(x[1]) for x in list(mail.q.queue)]
+                    # only re-sends of tick 5's clock (our ack might have been lost)
+                    assert {c.tick for c in waiting if isinstance(c, Clock)} <= {5}
+                ack = CoordAck(tick=m.tick)
+                if m.tick == spawn_tick:
+                    ack = CoordAck(tick=m.tick, task_robots=[0], task_ids=[77], spawn_ids=[0],
+                                   spawn_sources=[0], spawn_live=[False], spawn_kinds=[0])
+                    agent_token = s.liveliness().declare_token(keys.alive("robot", 0))
+                acked.add(m.tick)
+                put(s, keys.coord_ack, ack)
+                if m.tick >= spawn_tick + 1 + join + 3:
+                    break
+        assert 0 not in truths.get(spawn_tick, [0]) and 0 in truths[spawn_tick + 1]
+        first = spawn_tick + 1 + join
+        assert senses and senses[0].tick == first and senses[0].task_id == 77
+        assert clocks[first].agents == [] and clocks[first + 1].agents == [0]
+        assert clocks[first + 1].status_seqs == [1]
+        assert clocks[0].mode == "lockstep"
+    finally:
+        for x in subs + [t for t in (token, agent_token) if t is not None]:
+            x.undeclare()
+        s.close()

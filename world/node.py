@@ -14,8 +14,25 @@ timeout. With nobody to wait for, ticks are paced at dt/rtf wall seconds (so the
 at rtf without burning a core). Realtime: one tick every dt/rtf wall seconds.
 A command older than stale_cmd_s (sim seconds) counts as zero.
 
+Lockstep with a coordinator (its liveliness token alive/coordinator/main present) adds the
+coordinator to the barrier, so a run is repeatable: the Clock of tick k (BLOCK in lockstep)
+carries the roster (agents taking part) and, per agent, the seq of the last Status it
+published before answering tick k-1 (CmdVel.status_seq); the coordinator acts on exactly
+those statuses at sim time t_k and answers with a CoordAck(k) on coord/ack; tick k+1 runs
+only once every robot answered Sense(k) and the coordinator acked k (it works while the
+agents do). The ack's spawns/removes are applied at that boundary, in the ack's order; a
+body it spawns gets its first Sense JOIN_TICKS later, and that tick waits for its agent
+(up to JOIN_TIMEOUT_S wall seconds), so process start-up time never shows in the run. Each
+Sense carries the last task the coordinator sent its robot before the tick (Sense.task_id),
+which the agent applies before stepping. Deaths (a vanished liveliness token) take effect at
+the next boundary and show in the roster. A coordinator that does not ack within
+COORD_TIMEOUT_S, or whose token goes, leaves the barrier (the run goes on); it rejoins with
+its next ack of a current tick. ``--await-coordinator S`` holds tick 0 until a coordinator
+is present (``run`` sets it), so the first tick it sees is tick 0.
+
 Spawn/Remove (world/spawn, world/remove) are applied at the next tick boundary, in arrival
-order. Twins (Spawn.live) follow TwinCmd (world-frame velocity or teleport) and ignore
+order (a Spawn or Remove the coordinator also listed in an ack is applied once). Twins
+(Spawn.live) follow TwinCmd (world-frame velocity or teleport) and ignore
 CmdVel (which the hwbridge consumes on the same key). Bad input is dropped, counted and
 logged once per sender; the world never stalls on it. World/info is a queryable serving
 WorldInfo with the resolved config. Liveliness token: alive/world/main.
@@ -34,8 +51,8 @@ import numpy as np
 import zenoh
 
 from bus.keys import Keys
-from bus.messages import (Clock, CmdVel, Pose, Remove, Sense, Spawn, Truth, TwinCmd,
-                          WorldInfo)
+from bus.messages import (ROBOT_KINDS, Clock, CmdVel, CoordAck, Pose, Remove, Sense, Spawn,
+                          Truth, TwinCmd, WorldInfo)
 from bus.session import (Mailbox, Receiver, Shutdown, add_zenoh_args, keys_from_args,
                          open_session, publisher, setup_logging)
 
@@ -46,6 +63,18 @@ from .physics import Physics
 from .sensing import Sensors
 
 ABSURD_FACTOR = 10.0   # commands faster than this times the limit are dropped, not clamped
+JOIN_S = 0.05          # lockstep barrier: a spawned body's agent takes part this many sim
+                       # seconds (at least one tick) after the body appears; that tick waits
+                       # for its process to start. 1.0 s cost idle ticks, not less wall time,
+                       # and more cycles (corridor_doors seed 0 in-process: > 64 cycles and
+                       # 940 s sim unfinished, against 103 cycles and 859 s at one tick)
+JOIN_TIMEOUT_S = 30.0  # wall seconds a joining tick waits for a new agent's first command
+COORD_TIMEOUT_S = 60.0  # wall seconds a tick waits for the coordinator's ack
+
+
+def join_ticks(dt: float) -> int:
+    """Ticks between a body's spawn and its agent's first Sense (lockstep barrier)."""
+    return max(1, round(JOIN_S / dt))
 
 
 class WorldNode:
@@ -53,7 +82,7 @@ class WorldNode:
 
     def __init__(self, cfg: RunConfig, wm: WorldMap, session: zenoh.Session, keys: Keys,
                  log: logging.Logger, max_ticks: int | None = None,
-                 record_truth: bool = False):
+                 record_truth: bool = False, await_coordinator_s: float = 0.0):
         self.cfg, self.wm, self.s, self.keys, self.log = cfg, wm, session, keys, log
         w = cfg.world
         self.dt = w.dt
@@ -95,6 +124,26 @@ class WorldNode:
         self._token = None
         self._info_bytes = b""
         self._clock_pub = self._truth_pub = None
+        # lockstep roster and the coordinator barrier
+        self.roster: set[int] = set()          # agents taking part (waited for, in Clock)
+        self.gone: set[int] = set()            # tokens that vanished since the boundary
+        self.joins: dict[int, int] = {}        # body spawned by an ack -> tick it joins
+        self.joined: set[int] = set()          # joiners that answered their first tick
+        self.join_ticks = join_ticks(self.dt)
+        self.status_seq: dict[int, int] = {}   # rid -> seq announced by its last command
+        self.task_last: dict[int, int] = {}    # rid -> last task id an ack announced
+        self.coord_present = False             # coordinator liveliness token
+        self.coord_in = False                  # coordinator in the barrier
+        self.coord_join = False                # ... from the next boundary
+        self.acked = -1                        # last tick the coordinator acked
+        self.ack_ops: list = []                # spawns/removes of the ack, next boundary
+        self.via_ack: set = set()              # ("spawn"|"remove", rid) applied from an ack
+        self.coord_timeouts = 0
+        self.coord_wait_s = 0.0               # wall time ticks waited on the ack alone
+        self.join_wait_s = 0.0                # wall time of ticks waiting for a new agent
+        self._t_answered = self._t_acked = None
+        self.await_coordinator_s = float(await_coordinator_s)
+        self._clock_bytes = b""
 
     # ------------------------------------------------------------------ set-up
     def declare(self) -> None:
@@ -106,11 +155,15 @@ class WorldNode:
         # token that appears in between.
         self.agents |= self.alive_snapshot() or set()
         for key in (f"{k.prefix}/robot/*/cmd_vel", f"{k.prefix}/robot/*/twin_cmd", k.spawn,
-                    k.remove):
+                    k.remove, k.coord_ack):
             self._subs.append(s.declare_subscriber(key, cb))
         self._subs.append(s.liveliness().declare_subscriber(k.alive_robots(), cb,
                                                             history=True))
-        self._clock_pub = publisher(s, k.clock, block=False)
+        if self.lockstep:
+            self._subs.append(s.liveliness().declare_subscriber(
+                k.alive("coordinator", "**"), cb, history=True))
+        # lockstep: the clock is the coordinator's half of the barrier, it must not be lost
+        self._clock_pub = publisher(s, k.clock, block=self.lockstep)
         self._truth_pub = publisher(s, k.truth, block=False)
         info = WorldInfo(name=self.cfg.name, rv=self.cfg.rv,
                          robot_radius=self.cfg.robots.radius, dt=self.dt,
@@ -186,22 +239,66 @@ class WorldNode:
                 if kind == zenoh.SampleKind.DELETE:
                     self.agents.discard(rid)
                     self.gate.forget(rid)
+                    self.gone.add(rid)
                 else:
                     self.agents.add(rid)
+                    self.gone.discard(rid)
+            elif rel.startswith("alive/coordinator/"):
+                self._on_coordinator(kind != zenoh.SampleKind.DELETE)
+            elif rel == "coord/ack":
+                m = self.rx.decode(key, payload, CoordAck)
+                if m is not None:
+                    self._on_ack(m)
             elif rel.endswith("/cmd_vel"):
                 self._on_cmd(key, payload)
             elif rel.endswith("/twin_cmd"):
                 self._on_twin(key, payload)
             elif rel == "world/spawn":
                 m = self.rx.decode(key, payload, Spawn)
-                if m is not None:
+                if m is not None and ("spawn", m.robot) not in self.via_ack:
                     self.pending.append(m)
             elif rel == "world/remove":
                 m = self.rx.decode(key, payload, Remove)
-                if m is not None:
+                if m is not None and ("remove", m.robot) not in self.via_ack:
                     self.pending.append(m)
         except Exception as e:  # never crash on input
             self._drop(key, "error", f"{e.__class__.__name__}: {e}")
+
+    def _on_coordinator(self, present: bool) -> None:
+        self.coord_present = present
+        if not present:
+            if self.coord_in:
+                self.log.info("tick %d: the coordinator left: ticks no longer wait for it",
+                              self.tick)
+            self.coord_in = self.coord_join = False
+        elif self.lockstep and not self.coord_in:
+            self.coord_join = True  # waited for from the next boundary
+
+    def _on_ack(self, m: CoordAck) -> None:
+        """The coordinator's decisions of tick m.tick: tasks are announced to their robots
+        in the Senses after the next boundary, spawns/removes applied at it."""
+        for rid, tid in zip(m.task_robots, m.task_ids):
+            self.task_last[rid] = tid
+        ops: list = [Spawn(robot=r, source=src, kind=ROBOT_KINDS[kd], live=lv)
+                     for r, src, kd, lv in zip(m.spawn_ids, m.spawn_sources, m.spawn_kinds,
+                                               m.spawn_live)]
+        ops += [Remove(robot=r, reason="coordinator") for r in m.remove_ids]
+        fresh = m.tick == self.tick and self.acked < m.tick
+        for op in ops:
+            tag = ("spawn" if isinstance(op, Spawn) else "remove", op.robot)
+            if tag in self.via_ack:
+                continue
+            self.via_ack.add(tag)
+            # drop the same request if it already came on world/spawn or world/remove
+            self.pending = [p for p in self.pending
+                            if not (type(p) is type(op) and p.robot == op.robot)]
+            self.ack_ops.append((op, fresh and self.lockstep))
+        if fresh:
+            self.acked = m.tick
+            self._t_acked = time.monotonic()
+            if not self.coord_in and self.coord_present and self.lockstep:
+                self.coord_in = True
+                self.log.info("tick %d: the coordinator is back in the barrier", self.tick)
 
     def _on_cmd(self, key: str, payload: bytes) -> None:
         rid = self.keys.robot_id(key)
@@ -230,7 +327,11 @@ class WorldNode:
             if m.tick != -1 and m.tick < self.gate.tick:
                 self.drops["late command"] += 1
             else:
-                self.gate.answer(rid, m.tick)
+                if (self.gate.answer(rid, m.tick) and m.status_seq >= 0
+                        and rid in self.gate.expected):
+                    self.status_seq[rid] = m.status_seq
+                if self._t_answered is None and self.gate.all_answered():
+                    self._t_answered = time.monotonic()
 
     def _on_twin(self, key: str, payload: bytes) -> None:
         rid = self.keys.robot_id(key)
@@ -246,20 +347,33 @@ class WorldNode:
         self.twin_cmds[rid] = (m.vx, m.vy, m.wz, self.tick * self.dt)
 
     def _apply_pending(self) -> None:
+        """Spawns and removes at a tick boundary: the coordinator's acked ones first, in
+        ack order, then the others in arrival order."""
+        acked, self.ack_ops = self.ack_ops, []
         ops, self.pending = self.pending, []
+        for m, join in acked:
+            self._apply_op(m, "coord/ack")
+            if join and isinstance(m, Spawn) and not m.live and self.physics.has(m.robot):
+                self.joins[m.robot] = self.tick + self.join_ticks
         for m in ops:
-            if isinstance(m, Spawn):
-                self._spawn(m.robot, m.source, m.kind, m.live, None, "world/spawn")
+            self._apply_op(m, "world/spawn" if isinstance(m, Spawn) else "world/remove")
+
+    def _apply_op(self, m, where: str) -> None:
+        if isinstance(m, Spawn):
+            self._spawn(m.robot, m.source, m.kind, m.live, None, where)
+        else:
+            if self.physics.remove(m.robot):
+                self._undeclare_pubs(m.robot)
+                self.cmds.pop(m.robot, None)
+                self.twin_cmds.pop(m.robot, None)
+                self.last_sense.pop(m.robot, None)
+                self.gate.forget(m.robot)
+                self.roster.discard(m.robot)
+                self.joins.pop(m.robot, None)
+                self.status_seq.pop(m.robot, None)
+                self.log.info("removed robot %d (%s)", m.robot, m.reason or "no reason")
             else:
-                if self.physics.remove(m.robot):
-                    self._undeclare_pubs(m.robot)
-                    self.cmds.pop(m.robot, None)
-                    self.twin_cmds.pop(m.robot, None)
-                    self.last_sense.pop(m.robot, None)
-                    self.gate.forget(m.robot)
-                    self.log.info("removed robot %d (%s)", m.robot, m.reason or "no reason")
-                else:
-                    self._drop(self.keys.remove, "remove of an unknown robot", str(m.robot))
+                self._drop(self.keys.remove, "remove of an unknown robot", str(m.robot))
 
     def _spawn(self, rid, source, kind, live, pose, where) -> bool:
         if self.physics.has(rid):
@@ -308,11 +422,47 @@ class WorldNode:
                 alive = self.alive_snapshot()
                 if alive is not None:
                     self.agents -= late - alive
+                    self.gone |= late - alive
+                for rid in late & set(self.joins):   # a new agent that never came
+                    self.joins.pop(rid)
+                    self.log.warning("tick %d: robot %d's agent did not start within %.0f s; "
+                                     "it takes part once it answers (not repeatable)",
+                                     self.tick, rid, JOIN_TIMEOUT_S)
+            self.joined |= self.gate.answered & set(self.joins)
+            if self.gate.expected & set(self.joins):
+                self.join_wait_s += time.monotonic() - self.gate.opened
+            if self._t_acked is not None:
+                self.coord_wait_s += max(0.0, self._t_acked - (self._t_answered
+                                                               or self.gate.opened))
+            self._t_answered = self._t_acked = None
+            if self.coord_in and self.acked < self.tick:
+                self.coord_in = False
+                self.coord_timeouts += 1
+                self.log.warning("tick %d: no ack from the coordinator within %.0f s: ticks "
+                                 "no longer wait for it (not repeatable from here)",
+                                 self.tick, COORD_TIMEOUT_S)
         ids = self.physics.ids
         self.physics.step(self._commands(ids))
         self.tick += 1
         self._apply_pending()
         self.publish_tick()
+
+    def _boundary(self, live: list[bool], ids: list[int]) -> None:
+        """Lockstep roster at a tick boundary: deaths, joins, agents that appeared."""
+        for rid in self.gone:
+            self.roster.discard(rid)
+            self.joins.pop(rid, None)
+        self.gone = set()
+        for rid in self.joined:
+            if self.joins.pop(rid, None) is not None:
+                self.roster.add(rid)
+        self.joined = set()
+        virtual = {r for k, r in enumerate(ids) if not live[k]}
+        self.roster |= {r for r in self.agents & virtual if r not in self.joins}
+        self.roster &= virtual
+        if self.coord_join and self.coord_present:
+            self.coord_in, self.coord_join = True, False
+            self.log.info("tick %d: the coordinator joins the barrier", self.tick)
 
     def publish_tick(self) -> None:
         t = self.tick * self.dt
@@ -327,8 +477,14 @@ class WorldNode:
             self.truth_log.append({"tick": self.tick, "ids": list(ids),
                                    "x": pos[:, 0].tolist(), "y": pos[:, 1].tolist(),
                                    "theta": th.tolist()})
-        self._clock_pub.put(Clock(tick=self.tick, t=t, mode=self.cfg.world.mode,
-                                  rtf=min(self.meter.rtf, 1e6)).encode())
+        if self.lockstep:
+            self._boundary(live, list(ids))
+        roster = sorted(self.roster)
+        self._clock_bytes = Clock(tick=self.tick, t=t, mode=self.cfg.world.mode,
+                                  rtf=min(self.meter.rtf, 1e6), agents=roster,
+                                  status_seqs=[self.status_seq.get(r, 0) for r in roster]
+                                  ).encode()
+        self._clock_pub.put(self._clock_bytes)
         if self.odom_every and self.tick % self.odom_every == 0:
             for k, rid in enumerate(ids):
                 if not live[k]:
@@ -336,10 +492,16 @@ class WorldNode:
                                                y=float(pos[k, 1]), theta=float(th[k]),
                                                source="sim").encode())
         expected: set[int] = set()
-        self.has_agents = any(not live[k] and r in self.agents for k, r in enumerate(ids))
+        if self.lockstep:
+            self.has_agents = bool(self.roster or self.joins)
+        else:
+            self.has_agents = any(not live[k] and r in self.agents for k, r in enumerate(ids))
         if self.tick % self.sense_every == 0 and ids:
             self._publish_sense(ids, pos, th, t)
-            expected = {r for k, r in enumerate(ids) if not live[k] and r in self.agents}
+            if self.lockstep:
+                expected = self.roster | {r for r, j in self.joins.items() if j <= self.tick}
+            else:
+                expected = {r for k, r in enumerate(ids) if not live[k] and r in self.agents}
         self.gate.open(self.tick, expected, now)
         self.last_send = now
 
@@ -354,12 +516,15 @@ class WorldNode:
         co = b.cam_off.tolist()
         to = b.touch_off.tolist()
         self.last_sense = {}
+        barrier = self.coord_in
         for k, rid in enumerate(ids):
+            if self.joins.get(rid, -1) > self.tick:
+                continue  # its agent takes part from its join tick on
             a, e = co[k], co[k + 1]
             c, d = to[k], to[k + 1]
             data = Sense(robot=rid, tick=self.tick, t=t, ids=tgt[a:e], bearings=brg[a:e],
-                         back_bearings=back[a:e], touch=tb[c:d],
-                         touch_robot=tr[c:d]).encode()
+                         back_bearings=back[a:e], touch=tb[c:d], touch_robot=tr[c:d],
+                         task_id=self.task_last.get(rid, 0) if barrier else -1).encode()
             self.last_sense[rid] = data
             self.pubs[rid][0].put(data)
 
@@ -368,7 +533,21 @@ class WorldNode:
             data = self.last_sense.get(rid)
             if data is not None and rid in self.pubs:
                 self.pubs[rid][0].put(data)
+        if self._ack_missing():
+            self._clock_pub.put(self._clock_bytes)
         self.last_send = now
+
+    def _ack_missing(self) -> bool:
+        return self.lockstep and self.coord_in and self.acked < self.tick
+
+    def _gate_ready(self, now: float) -> bool:
+        g = self.gate
+        if g.all_answered():
+            return True
+        if not g.timed_out(now):
+            return False
+        # a new agent's process may still be starting: its joining tick waits longer
+        return not (g.waiting & set(self.joins)) or now - g.opened >= JOIN_TIMEOUT_S
 
     def serve_queries(self) -> None:
         q = self._queryable
@@ -388,18 +567,40 @@ class WorldNode:
     def ready(self, now: float) -> bool:
         if not self.lockstep:
             return self.pacer.due(now)
+        if self._ack_missing() and now - self.gate.opened < COORD_TIMEOUT_S:
+            return False
         if self.gate.expected:
-            return self.gate.ready(now)
-        if self.has_agents:      # a tick without Sense between two lockstepped ones
+            return self._gate_ready(now)
+        if self.has_agents or self.coord_in:  # a tick without Sense between lockstepped ones
             return True
         return self.pacer.due(now)
 
     def wait_time(self, now: float) -> float:
-        if self.lockstep and self.gate.expected:
-            w = min(self.gate.remaining(now), self.last_send + self.resend_s - now)
+        if self.lockstep and (self.gate.expected or self._ack_missing()):
+            w = self.last_send + self.resend_s - now
+            if self.gate.expected and not self.gate.all_answered():
+                w = min(w, self.gate.remaining(now))
         else:
             w = self.pacer.wait_time(now)
         return min(max(w, 0.0), 0.02)
+
+    def await_coordinator(self, stop) -> None:
+        """Hold tick 0 until a coordinator is present (``--await-coordinator``)."""
+        end = time.monotonic() + self.await_coordinator_s
+        while not stop.is_set() and not self.coord_present and time.monotonic() < end:
+            for item in self.mail.drain(10_000):
+                self.handle(item)
+            self.serve_queries()
+            item = self.mail.get(0.02)
+            if item is not None:
+                self.handle(item)
+        if self.coord_present:
+            self.coord_in, self.coord_join = True, False
+            self._clock_pub.put(self._clock_bytes)
+            self.last_send = time.monotonic()
+        else:
+            self.log.warning("no coordinator within %.0f s: ticking without it",
+                             self.await_coordinator_s)
 
     def run(self, stop) -> None:
         for sp in self.cfg.world.spawn:
@@ -410,6 +611,9 @@ class WorldNode:
         self.pacer.reset(time.monotonic())
         print(f"READY world {self.cfg.name} {self.cfg.world.mode} "
               f"robots={len(self.physics.ids)}", flush=True)
+        if self.lockstep and self.await_coordinator_s > 0:
+            self.await_coordinator(stop)
+            self.pacer.reset(time.monotonic())
         while not stop.is_set():
             if self.max_ticks is not None and self.tick >= self.max_ticks:
                 break
@@ -421,7 +625,8 @@ class WorldNode:
                 self.advance()
                 self.pacer.done(time.monotonic())
                 continue
-            if self.lockstep and self.gate.expected and now - self.last_send >= self.resend_s:
+            if (self.lockstep and (self.gate.expected or self._ack_missing())
+                    and now - self.last_send >= self.resend_s):
                 self._resend(now)
             item = self.mail.get(self.wait_time(now))
             if item is not None:
@@ -430,7 +635,9 @@ class WorldNode:
     def summary(self) -> dict:
         return {"ticks": self.tick, "t": self.tick * self.dt, "robots": len(self.physics.ids),
                 "invalid": dict(self.rx.invalid), "dropped": dict(self.drops),
-                "late": self.late_total}
+                "late": self.late_total, "coordinator_timeouts": self.coord_timeouts,
+                "coordinator_wait_s": round(self.coord_wait_s, 3),
+                "join_wait_s": round(self.join_wait_s, 3)}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -442,6 +649,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rtf", type=float, help="override [world].rtf")
     p.add_argument("--seed", type=int, help="override [world].seed")
     p.add_argument("--max-ticks", type=int, default=None, help="stop after this many ticks")
+    p.add_argument("--await-coordinator", type=float, default=0.0, metavar="S",
+                   help="lockstep: hold tick 0 until a coordinator is present, up to S wall "
+                        "seconds (default 0: don't wait)")
     p.add_argument("--truth-out", metavar="FILE",
                    help="write every tick's ground-truth poses to FILE (JSON) at exit")
     p.add_argument("--log-level", default="INFO")
@@ -486,7 +696,8 @@ def main(argv: list[str] | None = None) -> int:
     with Shutdown() as stop:
         try:
             node = WorldNode(cfg, wm, session, keys, log, max_ticks=args.max_ticks,
-                             record_truth=bool(args.truth_out))
+                             record_truth=bool(args.truth_out),
+                             await_coordinator_s=args.await_coordinator)
             node.declare()
             log.info("world %s: %s, %d walls, free area %.2f m^2, %d source(s), %s mode",
                      cfg.name, f"{len(wm.obstacles)} obstacles", len(wm.walls), wm.free_area,
