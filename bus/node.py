@@ -43,8 +43,8 @@ def run_node(prog: str, description: str | None,
              add_args: Callable[[argparse.ArgumentParser], None] | argparse.ArgumentParser,
              serve: Serve, *, argv: list[str] | None = None, logger: str | None = None,
              mode: str = "client", session_mode: str | None = None,
-             before_session: Callable[[argparse.Namespace], None] | None = None,
-             formatter_class=argparse.HelpFormatter) -> int:
+             before_session: Callable[[argparse.Namespace], "int | None"] | None = None,
+             formatter_class=argparse.HelpFormatter, grace_s: float | None = None) -> int:
     """Parse flags, set up logging, open the session, run ``serve`` inside Shutdown.
 
     add_args(parser): the process's own flags (the Zenoh flags and --log-level are added);
@@ -53,7 +53,11 @@ def run_node(prog: str, description: str | None,
       (None means 0). It must return soon after ``stop.is_set()``.
     mode: the default Zenoh mode of the shared flags; session_mode: force a mode when
       opening (a router opens its session in router mode).
-    before_session(args): checks that must fail before any connection (exit 2).
+    before_session(args): checks that must fail before any connection (exit 2); when it
+      returns an int, the process ends there with that code and opens no session (a
+      command with nothing to do on the bus, e.g. an offline conversion).
+    grace_s: the Shutdown watchdog's grace (None: its default; 0: no watchdog, for a
+      process that bounds its own exit, like a recorder that must not be cut mid-flush).
     """
     name = logger or prog.replace(" ", ".")
     if isinstance(add_args, argparse.ArgumentParser):
@@ -70,13 +74,15 @@ def run_node(prog: str, description: str | None,
     log = setup_logging(args.log_level, name)
     try:
         if before_session is not None:
-            before_session(args)
+            code = before_session(args)
+            if code is not None:
+                return int(code)
         keys = keys_from_args(args)
         session = open_session(args, session_mode)
     except (ValueError, ConnectionError) as e:
         log.error("%s", e)
         return 2
-    with Shutdown() as stop:
+    with Shutdown(grace_s=grace_s) as stop:
         try:
             code = serve(args, session, keys, stop)
             return 0 if code is None else int(code)

@@ -572,12 +572,7 @@ def convert(src: str | os.PathLike, dst: str | os.PathLike, *, scene_hz: float =
     return {"messages": n, "scenes": sink.scenes}
 
 
-def main(argv: list[str] | None = None) -> int:
-    from bus.session import Shutdown, add_zenoh_args, open_session, setup_logging
-    from swarmcover.progress import Progress
-
-    p = argparse.ArgumentParser(prog="swarmcover record", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+def _args(p: argparse.ArgumentParser) -> None:
     p.add_argument("keyexpr", nargs="?", default=None,
                    help="key expression to record (default sc/<swarm>/**; a key not starting "
                         "with 'sc/' is relative to sc/<swarm>/)")
@@ -594,65 +589,68 @@ def main(argv: list[str] | None = None) -> int:
                    help="no Zenoh: convert a recording (e.g. an older msgpack one) to this "
                         "format, adding the scene channel, and exit")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
-    p.add_argument("--log-level", default="INFO")
-    add_zenoh_args(p)
-    args = p.parse_args(argv)
-    setup_logging(args.log_level, "swarmcover.record")
-    scene_hz = 0.0 if args.no_scene else args.scene_hz
-    if scene_hz < 0:
-        log.error("--scene-hz %g: must be >= 0", scene_hz)
-        return 2
+
+
+def _prepare(args) -> int | None:
+    """Flags checked before any connection; ``--from`` converts offline and ends here."""
+    from bus.keys import check_swarm
+    from swarmcover.progress import Progress
+    args.scene_hz = 0.0 if args.no_scene else args.scene_hz
+    if args.scene_hz < 0:
+        raise ValueError(f"--scene-hz {args.scene_hz:g}: must be >= 0")
     if args.from_file is not None:
-        try:
-            with Progress(label="convert", unit="msg", enabled=not args.quiet) as prog:
-                st = convert(args.from_file, args.output, scene_hz=scene_hz, progress=prog)
-        except (OSError, ValueError) as e:
-            log.error("%s", e)
-            return 2
+        with Progress(label="convert", unit="msg", enabled=not args.quiet) as prog:
+            try:
+                st = convert(args.from_file, args.output, scene_hz=args.scene_hz, progress=prog)
+            except OSError as e:
+                raise ValueError(str(e)) from None
         print(f"converted {st['messages']} messages (+{st['scenes']} scene updates) "
               f"{args.from_file} -> {args.output}", file=sys.stderr)
         return 0
     try:
-        from bus.keys import check_swarm
         check_swarm(args.swarm)
     except ValueError as e:
-        log.error("--swarm: %s", e)
-        return 2
+        raise ValueError(f"--swarm: {e}") from None
+    return None
+
+
+def _serve(args, session, keys, stop) -> int:
+    from bus.node import ready
+    from swarmcover.progress import Progress
     keyexpr = resolve_keyexpr(args.keyexpr, args.swarm)
     excludes = [resolve_keyexpr(x, args.swarm) for x in args.exclude]
-    try:
-        session = open_session(args)
-    except (ValueError, ConnectionError) as e:
-        log.error("%s", e)
-        return 2
     rec = None
     try:
-        with Shutdown(grace_s=0) as stop:  # never cut a recording short mid-flush
-            try:
-                rec = Recorder(session, keyexpr, args.output, exclude=excludes,
-                               metadata={"swarm": args.swarm}, scene_hz=scene_hz)
-                rec.start()
-            except (ValueError, OSError) as e:
-                log.error("%s", e)
-                return 2
-            print(f"READY record {keyexpr} -> {args.output}", flush=True)
-            end = None if args.duration is None else time.monotonic() + args.duration
-            with Progress(label="record", unit="msg", enabled=not args.quiet) as prog:
-                while not stop.wait(0.2):
-                    prog.set(rec.messages, note=f"{rec.keys} keys")
-                    if end is not None and time.monotonic() >= end:
-                        break
-                stats = rec.stop()
-                prog.set(stats["messages"], note=f"{stats['keys']} keys")
-            info = "" if stats["world_info"] else " (no world/info: world not up?)"
-            print(f"recorded {stats['messages']} messages on {stats['keys']} keys, "
-                  f"{stats['bytes']} payload bytes -> {args.output}{info}", file=sys.stderr)
+        try:
+            rec = Recorder(session, keyexpr, args.output, exclude=excludes,
+                           metadata={"swarm": args.swarm}, scene_hz=args.scene_hz)
+            rec.start()
+        except OSError as e:
+            raise ValueError(str(e)) from None
+        ready(f"record {keyexpr} -> {args.output}")
+        end = None if args.duration is None else time.monotonic() + args.duration
+        with Progress(label="record", unit="msg", enabled=not args.quiet) as prog:
+            while not stop.wait(0.2):
+                prog.set(rec.messages, note=f"{rec.keys} keys")
+                if end is not None and time.monotonic() >= end:
+                    break
+            stats = rec.stop()
+            prog.set(stats["messages"], note=f"{stats['keys']} keys")
+        info = "" if stats["world_info"] else " (no world/info: world not up?)"
+        print(f"recorded {stats['messages']} messages on {stats['keys']} keys, "
+              f"{stats['bytes']} payload bytes -> {args.output}{info}", file=sys.stderr)
     finally:
         if rec is not None:
             rec.stop()
-        session.close()
     return 0
 
+
+def main(argv: list[str] | None = None) -> int:
+    from bus.node import run_node
+    # grace 0: the recorder bounds its own exit and must never be cut short mid-flush
+    return run_node("swarmcover record", __doc__, _args, _serve, argv=argv,
+                    logger="swarmcover.record", before_session=_prepare, grace_s=0,
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
 
 if __name__ == "__main__":
     sys.exit(main())
