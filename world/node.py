@@ -43,7 +43,6 @@ import argparse
 import json
 import logging
 import math
-import sys
 import time
 from collections import Counter
 
@@ -53,8 +52,8 @@ import zenoh
 from bus.keys import Keys
 from bus.messages import (ROBOT_KINDS, Clock, CmdVel, CoordAck, Pose, Remove, Sense, Spawn,
                           Truth, TwinCmd, WorldInfo)
-from bus.session import (Mailbox, Receiver, Shutdown, add_zenoh_args, keys_from_args,
-                         open_session, publisher, setup_logging)
+from bus.node import run_node
+from bus.session import Mailbox, Receiver, add_zenoh_args, publisher
 
 from .clock import LockstepGate, Pacer, RtfMeter
 from .config import ConfigError, RunConfig, load_config, to_toml, with_sources
@@ -675,43 +674,41 @@ def _overrides(cfg: RunConfig, args) -> RunConfig:
     return replace(cfg, world=w)
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    log = setup_logging(args.log_level, "swarmcover.world")
-    try:
-        cfg = _overrides(load_config(args.run_config), args)
-        wm = build_map(cfg)
-        cfg = with_sources(cfg, [tuple(s) for s in wm.sources])
-    except (ConfigError, ValueError) as e:
-        print(f"swarmcover world: {e}", file=sys.stderr, flush=True)
-        return 2
-    keys = keys_from_args(args)
-    try:
-        session = open_session(args)
-    except (ValueError, ConnectionError) as e:
-        print(f"swarmcover world: {e}", file=sys.stderr, flush=True)
-        return 2
+def _load(args) -> None:
+    """The run config and the map, checked before any connection (exit 2 naming the field)."""
+    cfg = _overrides(load_config(args.run_config), args)   # ConfigError is a ValueError
+    wm = build_map(cfg)
+    args.world_cfg = with_sources(cfg, [tuple(s) for s in wm.sources])
+    args.world_map = wm
+
+
+def _serve(args, session, keys, stop) -> int:
+    log = logging.getLogger("swarmcover.world")
+    cfg, wm = args.world_cfg, args.world_map
     node = None
     rc = 0
-    with Shutdown() as stop:
-        try:
-            node = WorldNode(cfg, wm, session, keys, log, max_ticks=args.max_ticks,
-                             record_truth=bool(args.truth_out),
-                             await_coordinator_s=args.await_coordinator)
-            node.declare()
-            log.info("world %s: %s, %d walls, free area %.2f m^2, %d source(s), %s mode",
-                     cfg.name, f"{len(wm.obstacles)} obstacles", len(wm.walls), wm.free_area,
-                     len(wm.sources), cfg.world.mode)
-            node.run(stop)
-        except Exception:
-            log.exception("world failed")
-            rc = 1
-        finally:
-            if node is not None:
-                node.close()
-                log.info("world stopped: %s", json.dumps(node.summary()))
-                if args.truth_out and node.truth_log is not None:
-                    with open(args.truth_out, "w") as f:
-                        json.dump({"summary": node.summary(), "ticks": node.truth_log}, f)
-            session.close()
+    try:
+        node = WorldNode(cfg, wm, session, keys, log, max_ticks=args.max_ticks,
+                         record_truth=bool(args.truth_out),
+                         await_coordinator_s=args.await_coordinator)
+        node.declare()
+        log.info("world %s: %s, %d walls, free area %.2f m^2, %d source(s), %s mode",
+                 cfg.name, f"{len(wm.obstacles)} obstacles", len(wm.walls), wm.free_area,
+                 len(wm.sources), cfg.world.mode)
+        node.run(stop)
+    except Exception:
+        log.exception("world failed")
+        rc = 1
+    finally:
+        if node is not None:
+            node.close()
+            log.info("world stopped: %s", json.dumps(node.summary()))
+            if args.truth_out and node.truth_log is not None:
+                with open(args.truth_out, "w") as f:
+                    json.dump({"summary": node.summary(), "ticks": node.truth_log}, f)
     return rc
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node("swarmcover world", __doc__, build_parser(), _serve, argv=argv,
+                    logger="swarmcover.world", before_session=_load)
