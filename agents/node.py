@@ -28,8 +28,8 @@ from pathlib import Path
 
 from bus.keys import Keys
 from bus.messages import CmdVel, Pose, Sense, Status, Task, WireError, WorldInfo, decode
-from bus.session import (Mailbox, Receiver, Shutdown, add_zenoh_args, keys_from_args,
-                         open_session, publisher, setup_logging)
+from bus.node import ready, run_node
+from bus.session import Mailbox, Receiver, Shutdown, add_zenoh_args, publisher
 
 from .behaviours import Behaviour
 from .params import ROBOT_KINDS, AgentParams, ParamError, from_toml_text, parse_override
@@ -312,57 +312,54 @@ class AgentNode:
             pass
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    log = setup_logging(args.log_level, f"swarmcover.agent.{args.id}")
+def _check(args) -> None:
     if args.id < 0:
-        log.error("--id %d: must be >= 0", args.id)
-        return 2
-    keys = keys_from_args(args)
+        raise ValueError(f"--id {args.id}: must be >= 0")
+
+
+def _serve(args, session, keys, stop) -> int:
+    log = logging.getLogger(f"swarmcover.agent.{args.id}")
     node = None
-    with Shutdown() as stop:  # installed first: a signal during start-up is a clean exit
+    try:
         try:
-            session = open_session(args)
-        except (ValueError, ConnectionError) as e:
+            params = resolve_params(args, session, keys, stop, log)
+        except ParamError as e:
             log.error("%s", e)
             return 2
-        try:
-            try:
-                params = resolve_params(args, session, keys, stop, log)
-            except ParamError as e:
-                log.error("%s", e)
-                return 2
-            if stop.is_set():
-                return 0
-            lockstep = world_mode(args, session, keys, stop, log) == "lockstep"
-            node = AgentNode(session, keys, args.id, params, args.live, log, lockstep=lockstep)
-            node.open()
-            node.publish_status()
-            print(f"READY agent {args.id} kind={params.kind}", flush=True)
-            log.info("robot %d up (%s, v_max %.2f m/s, rv %.2f m)", args.id, params.kind,
-                     params.v_max, params.rv)
-            parent = args.parent_pid
-            mb = node.mailbox
-            while not stop.is_set():
-                item = mb.get(timeout=0.2 if node.held is None else 0.02)
-                if item is not None or node.held is not None:
-                    node.handle(([item] if item is not None else []) + mb.drain())
-                if parent is not None and os.getppid() != parent:
-                    log.warning("parent %d is gone: stopping", parent)
-                    break
-                if not node.lockstep and time.monotonic() - node.last_status > HEARTBEAT_S:
-                    node.publish_status()
-            node.stop_robot()
-            log.info("robot %d stopped: %d ticks, %d skipped or repeated, %d invalid messages, "
-                     "%d behaviour errors, %d ticks without an announced task", args.id,
-                     node.ticks, node.skipped, node.rx.invalid_total, node.errors,
-                     node.task_waits)
-        finally:
-            if node is not None:
-                node.close()
-            session.close()
+        if stop.is_set():
+            return 0
+        lockstep = world_mode(args, session, keys, stop, log) == "lockstep"
+        node = AgentNode(session, keys, args.id, params, args.live, log, lockstep=lockstep)
+        node.open()
+        node.publish_status()
+        ready(f"agent {args.id} kind={params.kind}")
+        log.info("robot %d up (%s, v_max %.2f m/s, rv %.2f m)", args.id, params.kind,
+                 params.v_max, params.rv)
+        parent = args.parent_pid
+        mb = node.mailbox
+        while not stop.is_set():
+            item = mb.get(timeout=0.2 if node.held is None else 0.02)
+            if item is not None or node.held is not None:
+                node.handle(([item] if item is not None else []) + mb.drain())
+            if parent is not None and os.getppid() != parent:
+                log.warning("parent %d is gone: stopping", parent)
+                break
+            if not node.lockstep and time.monotonic() - node.last_status > HEARTBEAT_S:
+                node.publish_status()
+        node.stop_robot()
+        log.info("robot %d stopped: %d ticks, %d skipped or repeated, %d invalid messages, "
+                 "%d behaviour errors, %d ticks without an announced task", args.id,
+                 node.ticks, node.skipped, node.rx.invalid_total, node.errors,
+                 node.task_waits)
+    finally:
+        if node is not None:
+            node.close()
     return 0
 
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node("swarmcover agent", __doc__, build_parser(), _serve, argv=argv,
+                    logger=lambda a: f"swarmcover.agent.{a.id}", before_session=_check)
 
 if __name__ == "__main__":
     sys.exit(main())

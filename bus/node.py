@@ -41,7 +41,8 @@ Serve = Callable[[argparse.Namespace, zenoh.Session, Keys, Shutdown], "int | Non
 
 def run_node(prog: str, description: str | None,
              add_args: Callable[[argparse.ArgumentParser], None] | argparse.ArgumentParser,
-             serve: Serve, *, argv: list[str] | None = None, logger: str | None = None,
+             serve: Serve, *, argv: list[str] | None = None,
+             logger: "str | Callable[[argparse.Namespace], str] | None" = None,
              mode: str = "client", session_mode: str | None = None,
              before_session: Callable[[argparse.Namespace], "int | None"] | None = None,
              formatter_class=argparse.HelpFormatter, grace_s: float | None = None) -> int:
@@ -51,6 +52,7 @@ def run_node(prog: str, description: str | None,
       or a ready parser (its ``build_parser()``), completed with whichever of those it lacks.
     serve(args, session, keys, stop): the process's loop; its return value is the exit code
       (None means 0). It must return soon after ``stop.is_set()``.
+    logger: the logger's name, or a function of the parsed flags giving it.
     mode: the default Zenoh mode of the shared flags; session_mode: force a mode when
       opening (a router opens its session in router mode).
     before_session(args): checks that must fail before any connection (exit 2); when it
@@ -59,7 +61,6 @@ def run_node(prog: str, description: str | None,
     grace_s: the Shutdown watchdog's grace (None: its default; 0: no watchdog, for a
       process that bounds its own exit, like a recorder that must not be cut mid-flush).
     """
-    name = logger or prog.replace(" ", ".")
     if isinstance(add_args, argparse.ArgumentParser):
         p = add_args
     else:
@@ -71,18 +72,21 @@ def run_node(prog: str, description: str | None,
     if not any(a.dest == "log_level" for a in p._actions):
         p.add_argument("--log-level", default="INFO", help="logging level (default INFO)")
     args = p.parse_args(argv)
+    name = logger(args) if callable(logger) else (logger or prog.replace(" ", "."))
     log = setup_logging(args.log_level, name)
-    try:
-        if before_session is not None:
-            code = before_session(args)
-            if code is not None:
-                return int(code)
-        keys = keys_from_args(args)
-        session = open_session(args, session_mode)
-    except (ValueError, ConnectionError) as e:
-        log.error("%s", e)
-        return 2
+    # installed first: a signal while the session opens (a router slow to answer) is a
+    # clean exit, not a KeyboardInterrupt traceback
     with Shutdown(grace_s=grace_s) as stop:
+        try:
+            if before_session is not None:
+                code = before_session(args)
+                if code is not None:
+                    return int(code)
+            keys = keys_from_args(args)
+            session = open_session(args, session_mode)
+        except (ValueError, ConnectionError) as e:
+            log.error("%s", e)
+            return 2
         try:
             code = serve(args, session, keys, stop)
             return 0 if code is None else int(code)

@@ -61,8 +61,9 @@ def test_alive_watch_sees_departure(procs, router, zargs):
 def test_invalid_payload_echoed_as_error_not_crash(procs, router, zargs):
     swarm = zargs[zargs.index("--swarm") + 1]
     echo = procs.swarmcover("topics", "echo", "robot/*/sense", *zargs, "--count", "2",
-                            "--duration", "20")
-    time.sleep(1.5)
+                            "--duration", "40")
+    echo.wait_line("# echo", timeout=30)   # subscribed (a fixed 1.5 s lost the race under load)
+    time.sleep(0.5)                        # ... and the declaration reached the router
     s = client_session(router, swarm)
     try:
         s.put(f"sc/{swarm}/robot/3/sense", b"\x81\xa2_t\xa5Sense")  # truncated map
