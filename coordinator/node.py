@@ -28,8 +28,8 @@ import zenoh
 
 from bus.keys import Keys
 from bus.messages import ROBOT_KINDS, Clock, Complex, CoordAck, Status, WorldInfo
-from bus.session import (Mailbox, Receiver, Shutdown, add_zenoh_args, keys_from_args,
-                         open_session, publisher, setup_logging)
+from bus.node import run_node
+from bus.session import Mailbox, Receiver, Shutdown, publisher
 from bus.trust import SignedPublisher, key_from_env
 
 from .config import CoordinatorConfig
@@ -189,34 +189,20 @@ def load_run_config(path: str | None, info: WorldInfo | None):
     return load_config(path)
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="swarmcover coordinator", description=__doc__)
+def _args(p: argparse.ArgumentParser) -> None:
     p.add_argument("run_config", metavar="CONFIG", nargs="?", help="run config (TOML or ROS map YAML); default: "
                    "the world's resolved config from world/info")
-    add_zenoh_args(p)
     p.add_argument("--epoch", type=int, default=None,
                    help="task-id epoch (default: from the clock; a restart gets a new one)")
     p.add_argument("--world-timeout", type=float, default=30.0,
                    help="seconds to wait for world/info (default 30)")
     p.add_argument("--exit-on-done", action="store_true",
                    help="exit once coverage is certified (default: keep watching for failures)")
-    p.add_argument("--log-level", default="INFO")
-    args = p.parse_args(argv)
-    setup_logging(args.log_level, "swarmcover.coordinator")
-    keys = keys_from_args(args)
-    try:
-        session = open_session(args)
-    except (ValueError, ConnectionError) as e:
-        log.error("%s", e)
-        return 2
-    with Shutdown() as stop:
-        try:
-            return _serve(args, session, keys, stop)
-        except (ValueError, SystemExit) as e:
-            log.error("%s", e)
-            return 2
-        finally:
-            session.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node("swarmcover coordinator", __doc__, _args, _serve, argv=argv,
+                    logger="swarmcover.coordinator")
 
 
 def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:

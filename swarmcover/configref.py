@@ -103,6 +103,8 @@ DOCS: dict[str, dict[str, tuple[str, str]]] = {
         "silence_s": ("s", "warn when a body is silent this long"),
         "rate_hz": ("Hz", "twin sync loop"),
         "cmd_rate_hz": ("Hz", "command output to robots, zeros included"),
+        "cmd_ttl_s": ("s", "each LiveCmd's expiry, counted from its receipt: the robot's driver "
+                           "stops when it passes, whoever failed (>= 2 command periods)"),
         "pose_rate_hz": ("Hz", "robot/<id>/odom of live robots"),
         "k_omega": ("1/s", "unicycle mapping of a body-frame vy (spec 4.8)"),
         "k_v": ("-", "unicycle mapping gain on vx"),
@@ -131,6 +133,8 @@ DOCS: dict[str, dict[str, tuple[str, str]]] = {
         "mocap_noise_m": ("m", "fake mocap position noise (sigma)"),
         "mocap_noise_rad": ("rad", "fake mocap heading noise (sigma)"),
         "seed": ("-", "random seed of the stand-in robots"),
+        "cmd_timeout_s": ("s", "the stand-in driver's own command timeout: caps any ttl, and "
+                               "applies to a Twist or a LiveCmd without one"),
     },
 }
 
