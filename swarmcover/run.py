@@ -336,6 +336,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--record", action="store_true", help="record every message to run.mcap")
     p.add_argument("--view", action="store_true", help="serve the live view in the browser")
     p.add_argument("--view-port", type=int, default=8765)
+    p.add_argument("--foxglove", action="store_true",
+                   help="serve the scene to Foxglove/Lichtblick (foxglove-sdk WebSocket server, "
+                        "topic /swarmcover/scene) from the run's view process")
+    p.add_argument("--foxglove-port", type=int, default=8766, metavar="PORT",
+                   help="WebSocket port of --foxglove (default 8766)")
     p.add_argument("--wall-timeout", type=float, default=3600.0,
                    help="give up after this many wall seconds (default 3600)")
     p.add_argument("--router", default=None, metavar="ENDPOINT",
@@ -460,7 +465,10 @@ def main(argv: list[str] | None = None) -> int:
         live_limits, swarm = checked.live_limits, checked.swarm
         cfg, resolved, limits = default_robots_max(cfg, wmap, resolved)
         out = prepare_out(Path(args.out or f"runs/{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"))
-        (out / "resolved.toml").write_text(resolved)
+        from swarmcover.configref import complete_resolved_toml
+        # every value the run uses, [agent] and [coordinator] defaults included (what the
+        # processes read back is the same config: only defaults are written out)
+        (out / "resolved.toml").write_text(complete_resolved_toml(resolved, str(args.config)))
     except (ValueError, OSError) as e:
         print(f"swarmcover run: {' '.join(str(e).split())}", file=sys.stderr)
         return 2
@@ -701,10 +709,15 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
             _start_hwbridge(launcher, hw, conf_path, out)
             threading.Thread(target=lambda: stop.wait() and _halt_movers(launcher, then=()),
                              daemon=True, name="halt-live").start()  # Ctrl-C: zeros at once
-        if args.view:  # it checks the coordinator's signatures with the run key
-            launcher.start("view", ["view", "--port", str(args.view_port)],
+        if args.view or args.foxglove:  # it checks the coordinator's signatures with the run key
+            fox = ["--foxglove", "--foxglove-port", str(args.foxglove_port)] if args.foxglove else []
+            launcher.start("view", ["view", "--port", str(args.view_port), *fox],
                            env={KEY_ENV: coord.key.hex()})
-            print(f"live view: http://127.0.0.1:{args.view_port}/", file=sys.stderr, flush=True)
+            if args.view:
+                print(f"live view: http://127.0.0.1:{args.view_port}/", file=sys.stderr, flush=True)
+            if args.foxglove:
+                print(f"Foxglove/Lichtblick: open a connection to ws://127.0.0.1:{args.foxglove_port}",
+                      file=sys.stderr, flush=True)
         _start_coordinator(launcher, conf_path, coord)
         last_check = 0.0
         while not stop.is_set() and not state.stop_reason:

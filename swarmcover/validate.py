@@ -66,7 +66,9 @@ def check_flags(args) -> None:
             raise ck.err("--port", args.port, "give either --router or --port, not both")
     if args.port is not None:
         _port(ck, "--port", args.port, busy_check=True)
-    if args.view:
+    if getattr(args, "foxglove", False):
+        _port(ck, "--foxglove-port", args.foxglove_port, busy_check=True)
+    if args.view or getattr(args, "foxglove", False):
         _port(ck, "--view-port", args.view_port, busy_check=True)
     elif args.view_port is not None:
         _port(ck, "--view-port", args.view_port, busy_check=False)
