@@ -154,3 +154,18 @@ def no_leftovers(out: Path, timeout: float = 10.0) -> None:
     while time.monotonic() < end and pids_with(str(out)):
         time.sleep(0.2)
     assert not pids_with(str(out)), "processes of the run are still alive"
+
+
+def decoded_into(typ, sink: list, lock):
+    """A Zenoh subscriber callback: appends each payload that decodes as ``typ`` to ``sink``
+    under ``lock``; undecodable payloads are dropped (it never blocks nor raises)."""
+    from bus.messages import decode
+
+    def cb(sample):
+        try:
+            m = decode(sample.payload.to_bytes(), typ)
+        except Exception:
+            return
+        with lock:
+            sink.append(m)
+    return cb

@@ -13,8 +13,8 @@ import time
 import pytest
 
 from bus.keys import Keys
-from bus.messages import Status, Task, Truth, decode
-from procs import client_session
+from bus.messages import Status, Task, Truth
+from procs import client_session, decoded_into
 
 pytestmark = pytest.mark.timeout(150)
 
@@ -55,15 +55,7 @@ class Latest:
     def __init__(self, session, key, typ):
         self.msgs = []
         self.lock = threading.Lock()
-
-        def cb(sample):
-            try:
-                m = decode(sample.payload.to_bytes(), typ)
-            except Exception:
-                return
-            with self.lock:
-                self.msgs.append(m)
-        self.sub = session.declare_subscriber(key, cb)
+        self.sub = session.declare_subscriber(key, decoded_into(typ, self.msgs, self.lock))
 
     def all(self):
         with self.lock:
