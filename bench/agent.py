@@ -18,7 +18,6 @@ import argparse
 import json
 import math
 import os
-import socket
 import subprocess
 import sys
 import time
@@ -26,35 +25,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
-CLK = os.sysconf("SC_CLK_TCK")
 
-
-def eprint(*a):
-    print(*a, file=sys.stderr, flush=True)
-
-
-def cpu_seconds(pid: int) -> float:
-    """utime + stime of a process (s), threads included."""
-    with open(f"/proc/{pid}/stat") as f:
-        fields = f.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / CLK
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def wait_line(proc, needle, timeout=30.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        line = proc.stdout.readline()
-        if not line:
-            break
-        if needle in line:
-            return line
-    raise RuntimeError(f"no {needle!r} from {proc.args}")
+from bench.common import CLK, cpu_seconds, eprint, free_port, wait_line  # noqa: E402
 
 
 # --------------------------------------------------------------------------- echo process

@@ -15,7 +15,6 @@ from __future__ import annotations
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -35,19 +34,7 @@ def main() -> int:
         if only and name not in only:
             continue
         tmp = Path(tempfile.mkdtemp(prefix="bad-input-"))
-        (tmp / "afile").write_text("a file, not a folder")
-        busy = socket.socket()
-        busy.bind(("127.0.0.1", 0))
-        busy.listen(1)
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", 0))
-            closed = s.getsockname()[1]
-        subs = dict(tmp=str(tmp), busy=str(busy.getsockname()[1]), closed=str(closed))
-        fl = [f.format(**subs) for f in flags]
-        if "--out" not in fl:
-            fl += ["--out", str(tmp / "run")]
-        argv = T.SWARMCOVER + ["run", str(T._config(tmp, make)), "--quiet", "--wall-timeout",
-                               "15"] + fl
+        busy, subs, argv = T.prepare(tmp, make, flags)
         t0 = time.monotonic()
         p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                              cwd=str(tree), start_new_session=True)

@@ -26,7 +26,6 @@ import math
 import os
 import random
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -35,16 +34,12 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
-CLK = os.sysconf("SC_CLK_TCK")
 
+from bench.common import cpu_seconds, eprint, free_port, wait_line  # noqa: E402
 from hwbridge.fake_robot import DiffDriveSim, DriveParams  # noqa: E402
 from hwbridge.frames import wrap  # noqa: E402
 from hwbridge.metrics import TrackLog  # noqa: E402
 from hwbridge.twin import TwinGains, VelocityEstimator, integrate, twin_command  # noqa: E402
-
-
-def eprint(*a):
-    print(*a, file=sys.stderr, flush=True)
 
 
 def waypoint_command(pose, goal, v_max=0.25):
@@ -151,18 +146,6 @@ mocap_noise_rad = 0.002
 """
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def cpu_seconds(pid: int) -> float:
-    with open(f"/proc/{pid}/stat") as f:
-        fields = f.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / CLK
-
-
 class Procs:
     def __init__(self):
         self.all = []
@@ -188,17 +171,6 @@ class Procs:
                     continue
 
 
-def wait_line(proc, needle, timeout=40.0) -> str:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        line = proc.stdout.readline()
-        if not line:
-            break
-        if needle in line:
-            return line
-    raise RuntimeError(f"no {needle!r} from {proc.args}")
-
-
 def procs_run(feedforward: bool, seconds: float, seed: int = 0) -> dict:
     from bus.keys import Keys
     from bus.messages import CmdVel, Pose, decode
@@ -215,15 +187,15 @@ def procs_run(feedforward: bool, seconds: float, seed: int = 0) -> dict:
     ps = Procs()
     try:
         router = ps.start("router", "--listen", endpoint)
-        wait_line(router, "READY router")
+        wait_line(router, "READY router", 40.0)
         fakes = [ps.start("fake-robot", cfg, "--id", rid, *z) for rid in (1, 2)]
         for f in fakes:
-            wait_line(f, "READY fake-robot")
+            wait_line(f, "READY fake-robot", 40.0)
         world = ps.start("world", cfg, *z)
-        wait_line(world, "READY world")
+        wait_line(world, "READY world", 40.0)
         report = Path(tmp) / "report.json"
         bridge = ps.start("hwbridge", cfg, "--spawn", "--report", report, *z)
-        wait_line(bridge, "READY hwbridge")
+        wait_line(bridge, "READY hwbridge", 40.0)
         eprint(f"  procs up (feedforward={feedforward}); driving for {seconds:.0f} s")
         s = client_session(endpoint, swarm)
         keys = Keys(swarm)

@@ -22,7 +22,6 @@ import argparse
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -32,18 +31,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from bench.common import eprint, free_port  # noqa: E402
 from bus import messages as m  # noqa: E402
 from bus.keys import Keys  # noqa: E402
-
-
-def eprint(*a):
-    print(*a, file=sys.stderr, flush=True)
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def payloads(keys: Keys, n: int) -> list[tuple[str, bytes]]:

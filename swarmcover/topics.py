@@ -72,6 +72,15 @@ def _loop(args, session, mailbox: Mailbox, on_item, stop: Shutdown) -> None:
             return
 
 
+def _subscribe(session, keys: Keys, keyexpr: str, what: str):
+    """A mailbox subscribed to ``keyexpr`` (relative to the swarm); says so on stderr."""
+    expr = _full(keys, keyexpr)
+    mb = Mailbox()
+    sub = session.declare_subscriber(expr, mb.callback)
+    print(f"# {what} {expr}", file=sys.stderr, flush=True)
+    return mb, sub
+
+
 def cmd_list(args, session, keys: Keys, stop) -> int:
     expr = _full(keys, args.keyexpr or "**")
     mb = Mailbox()
@@ -114,10 +123,7 @@ def cmd_list(args, session, keys: Keys, stop) -> int:
 
 
 def cmd_echo(args, session, keys: Keys, stop) -> int:
-    expr = _full(keys, args.keyexpr)
-    mb = Mailbox()
-    sub = session.declare_subscriber(expr, mb.callback)
-    print(f"# echo {expr}", file=sys.stderr, flush=True)
+    mb, sub = _subscribe(session, keys, args.keyexpr, "echo")
 
     def on(key, payload, kind):
         if args.raw:
@@ -138,10 +144,7 @@ def cmd_echo(args, session, keys: Keys, stop) -> int:
 
 
 def cmd_hz(args, session, keys: Keys, stop) -> int:
-    expr = _full(keys, args.keyexpr)
-    mb = Mailbox()
-    sub = session.declare_subscriber(expr, mb.callback)
-    print(f"# hz {expr}", file=sys.stderr, flush=True)
+    mb, sub = _subscribe(session, keys, args.keyexpr, "hz")
     stamps: list[float] = []
     next_print = time.monotonic() + 1.0
 

@@ -1,6 +1,7 @@
 """Helpers for tests that start real processes: free ports, a process group reaper."""
 from __future__ import annotations
 
+import json
 import os
 import signal
 import socket
@@ -132,3 +133,39 @@ def client_session(endpoint: str, swarm: str = "default"):
     p = argparse.ArgumentParser()
     add_zenoh_args(p)
     return open_session(p.parse_args(["--connect", endpoint, "--swarm", swarm]))
+
+
+def wait_cycle(out: Path, cycle: int, timeout: float) -> dict:
+    """The last row of ``out``/cycles.jsonl once its cycle reaches ``cycle``."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        f = out / "cycles.jsonl"
+        if f.exists():
+            rows = [json.loads(x) for x in f.read_text().splitlines() if x.strip()]
+            if rows and rows[-1]["cycle"] >= cycle:
+                return rows[-1]
+        time.sleep(0.2)
+    raise AssertionError(f"cycle {cycle} not reached in {timeout} s")
+
+
+def no_leftovers(out: Path, timeout: float = 10.0) -> None:
+    """Asserts that no process whose command line names ``out`` outlives ``timeout``."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end and pids_with(str(out)):
+        time.sleep(0.2)
+    assert not pids_with(str(out)), "processes of the run are still alive"
+
+
+def decoded_into(typ, sink: list, lock):
+    """A Zenoh subscriber callback: appends each payload that decodes as ``typ`` to ``sink``
+    under ``lock``; undecodable payloads are dropped (it never blocks nor raises)."""
+    from bus.messages import decode
+
+    def cb(sample):
+        try:
+            m = decode(sample.payload.to_bytes(), typ)
+        except Exception:
+            return
+        with lock:
+            sink.append(m)
+    return cb

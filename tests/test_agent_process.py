@@ -12,7 +12,7 @@ import pytest
 
 from bus.keys import Keys
 from bus.messages import CmdVel, Sense, Status, Task, decode
-from procs import client_session
+from procs import client_session, decoded_into
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -26,14 +26,7 @@ class Collector:
         self.subs = [session.declare_subscriber(k, self._cb(k, t)) for k, t in keys_and_types]
 
     def _cb(self, key, typ):
-        def cb(sample):
-            try:
-                m = decode(sample.payload.to_bytes(), typ)
-            except Exception:
-                return
-            with self.lock:
-                self.msgs[key].append(m)
-        return cb
+        return decoded_into(typ, self.msgs[key], self.lock)
 
     def get(self, key):
         with self.lock:

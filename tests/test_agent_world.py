@@ -3,6 +3,8 @@ hold records a vertex, a test drive takes the robot away, goto brings it back to
 recorded vertex within tolerance; the agent reads its parameters from world/info."""
 from __future__ import annotations
 
+import contextlib
+import functools
 import math
 import signal
 import threading
@@ -11,8 +13,8 @@ import time
 import pytest
 
 from bus.keys import Keys
-from bus.messages import Status, Task, Truth, decode
-from procs import client_session
+from bus.messages import Status, Task, Truth
+from procs import client_session, decoded_into
 
 pytestmark = pytest.mark.timeout(150)
 
@@ -53,15 +55,7 @@ class Latest:
     def __init__(self, session, key, typ):
         self.msgs = []
         self.lock = threading.Lock()
-
-        def cb(sample):
-            try:
-                m = decode(sample.payload.to_bytes(), typ)
-            except Exception:
-                return
-            with self.lock:
-                self.msgs.append(m)
-        self.sub = session.declare_subscriber(key, cb)
+        self.sub = session.declare_subscriber(key, decoded_into(typ, self.msgs, self.lock))
 
     def all(self):
         with self.lock:
@@ -77,33 +71,55 @@ class Latest:
         raise AssertionError(f"timed out; last: {self.all()[-1:]}")
 
 
-def test_agent_returns_to_a_recorded_vertex_in_the_real_world(procs, zargs, router, tmp_path):
+def send_until(s, keys, status, task, pred, timeout):
+    """Put the task (again, idempotently) until a Status satisfies pred."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        s.put(keys.task(0), task.encode())
+        try:
+            return status.wait(pred, 2.0)
+        except AssertionError:
+            continue
+    raise AssertionError(f"task {task.task_id} never finished: {status.all()[-1:]}")
+
+
+def _pose0(truth):
+    """Robot 0's (x, y, theta) in the latest ground truth."""
+    last = truth.all()[-1]
+    k = last.ids.index(0)
+    return last.x[k], last.y[k], last.theta[k]
+
+
+@contextlib.contextmanager
+def _world_and_agent(procs, zargs, router, cfg, *agent_args, ready="READY agent 0"):
+    """The world process on ``cfg``, agent 0 and a client session recording its Status and
+    the ground truth: yields (send, status, truth, agent), send = send_until on this
+    session. On a clean exit the agent must stop with 0 on SIGINT."""
     swarm = zargs[zargs.index("--swarm") + 1]
     keys = Keys(swarm)
-    cfg = tmp_path / "run.toml"
-    cfg.write_text(CONFIG)
     world = procs.swarmcover("world", cfg, *zargs)
     world.wait_line("READY world", timeout=60)
-    agent = procs.swarmcover("agent", "--id", 0, *zargs)
-    agent.wait_line("READY agent 0", timeout=40)
+    agent = procs.swarmcover("agent", "--id", 0, *agent_args, *zargs)
+    agent.wait_line(ready, timeout=40)
     s = client_session(router, swarm)
     try:
         status = Latest(s, keys.status(0), Status)
         truth = Latest(s, keys.truth, Truth)
+        yield functools.partial(send_until, s, keys, status), status, truth, agent
+        status.sub.undeclare()
+        truth.sub.undeclare()
+    finally:
+        s.close()
+    agent.signal(signal.SIGINT)
+    assert agent.wait(15) == 0
 
-        def send_until(task, pred, timeout):
-            """Put the task (again, idempotently) until a Status satisfies pred."""
-            end = time.monotonic() + timeout
-            while time.monotonic() < end:
-                s.put(keys.task(0), task.encode())
-                try:
-                    return status.wait(pred, 2.0)
-                except AssertionError:
-                    continue
-            raise AssertionError(f"task {task.task_id} never finished: {status.all()[-1:]}")
 
-        st = send_until(Task(task_id=1, robot=0, kind="hold", vertex=0),
-                        lambda m: m.task_id == 1 and m.task_state == "done", 30)
+def test_agent_returns_to_a_recorded_vertex_in_the_real_world(procs, zargs, router, tmp_path):
+    cfg = tmp_path / "run.toml"
+    cfg.write_text(CONFIG)
+    with _world_and_agent(procs, zargs, router, cfg) as (send, status, truth, agent):
+        st = send(Task(task_id=1, robot=0, kind="hold", vertex=0),
+                  lambda m: m.task_id == 1 and m.task_state == "done", 30)
         assert sorted(st.nbr_ids) == [1, 2, 3]
         recorded = dict(zip(st.nbr_ids, st.nbr_bearings))
         assert abs(recorded[1]) < math.radians(2)          # the world frame is the body frame
@@ -111,25 +127,18 @@ def test_agent_returns_to_a_recorded_vertex_in_the_real_world(procs, zargs, rout
         k = home.ids.index(0)
         home_xy = (home.x[k], home.y[k])
 
-        send_until(Task(task_id=2, robot=0, kind="test_drive", vertex=0, direction=-2.0,
-                        distance=0.3), lambda m: m.task_id == 2 and m.task_state == "done", 40)
+        send(Task(task_id=2, robot=0, kind="test_drive", vertex=0, direction=-2.0,
+                  distance=0.3), lambda m: m.task_id == 2 and m.task_state == "done", 40)
         ids = list(recorded)
-        st = send_until(Task(task_id=3, robot=0, kind="goto", vertex=0, landmarks=ids,
-                             bearings=[recorded[i] for i in ids], timeout_s=60),
-                        lambda m: m.task_id == 3 and m.task_state != "running"
-                        and m.state == "holding", 60)
+        st = send(Task(task_id=3, robot=0, kind="goto", vertex=0, landmarks=ids,
+                       bearings=[recorded[i] for i in ids], timeout_s=60),
+                  lambda m: m.task_id == 3 and m.task_state != "running"
+                  and m.state == "holding", 60)
         assert st.task_state == "done", st
         time.sleep(0.5)
-        last = truth.all()[-1]
-        k = last.ids.index(0)
-        err = math.hypot(last.x[k] - home_xy[0], last.y[k] - home_xy[1])
-        assert err < 0.04, (err, home_xy, (last.x[k], last.y[k]))
-        status.sub.undeclare()
-        truth.sub.undeclare()
-    finally:
-        s.close()
-    agent.signal(signal.SIGINT)
-    assert agent.wait(15) == 0
+        x, y, _ = _pose0(truth)
+        err = math.hypot(x - home_xy[0], y - home_xy[1])
+        assert err < 0.04, (err, home_xy, (x, y))
     assert "parameters from the world/info config of run 'agent_test'" in agent.output()
     assert "invalid messages" in agent.output()
 
@@ -202,110 +211,56 @@ def test_diffdrive_agent_returns_with_frame_alignment(procs, zargs, router, tmp_
     """A differential-drive body (it rotates): the goto carries ref_offsets (heading of the
     recording frame minus each landmark's heading; the test plays the coordinator and takes
     the headings from ground truth) and the agent aligns frames from mutual bearings."""
-    swarm = zargs[zargs.index("--swarm") + 1]
-    keys = Keys(swarm)
     cfg = tmp_path / "dd.toml"
     cfg.write_text(CONFIG.replace("{robot = 0, pose = [2.0, 1.5, 0.0]}",
                                   '{robot = 0, pose = [2.0, 1.5, 0.7], kind = "diffdrive"}'))
-    world = procs.swarmcover("world", cfg, *zargs)
-    world.wait_line("READY world", timeout=60)
-    agent = procs.swarmcover("agent", "--id", 0, "--kind", "diffdrive", *zargs)
-    agent.wait_line("READY agent 0 kind=diffdrive", timeout=40)
-    s = client_session(router, swarm)
-    try:
-        status = Latest(s, keys.status(0), Status)
-        truth = Latest(s, keys.truth, Truth)
-
-        def send_until(task, pred, timeout):
-            end = time.monotonic() + timeout
-            while time.monotonic() < end:
-                s.put(keys.task(0), task.encode())
-                try:
-                    return status.wait(pred, 2.0)
-                except AssertionError:
-                    continue
-            raise AssertionError(f"task {task.task_id} never finished: {status.all()[-1:]}")
-
-        st = send_until(Task(task_id=1, robot=0, kind="hold", vertex=0),
-                        lambda m: m.task_id == 1 and m.task_state == "done", 30)
+    with _world_and_agent(procs, zargs, router, cfg, "--kind", "diffdrive",
+                          ready="READY agent 0 kind=diffdrive") as (send, status, truth, _):
+        st = send(Task(task_id=1, robot=0, kind="hold", vertex=0),
+                  lambda m: m.task_id == 1 and m.task_state == "done", 30)
         recorded = dict(zip(st.nbr_ids, st.nbr_bearings))
         assert sorted(recorded) == [1, 2, 3]
-        home = truth.all()[-1]
-        k = home.ids.index(0)
-        home_xy, home_th = (home.x[k], home.y[k]), home.theta[k]
+        *home_xy, home_th = _pose0(truth)
         assert abs(home_th - 0.7) < 0.05
         # body-frame direction -0.7 at heading 0.7: world +x, staying within rv of all three
-        send_until(Task(task_id=2, robot=0, kind="test_drive", vertex=0, direction=-0.7,
-                        distance=0.2), lambda m: m.task_id == 2 and m.task_state == "done", 40)
-        away = truth.all()[-1]
-        k = away.ids.index(0)
-        assert abs(away.theta[k] - home_th) > 0.5          # it turned to drive
+        send(Task(task_id=2, robot=0, kind="test_drive", vertex=0, direction=-0.7,
+                  distance=0.2), lambda m: m.task_id == 2 and m.task_state == "done", 40)
+        assert abs(_pose0(truth)[2] - home_th) > 0.5          # it turned to drive
         ids = list(recorded)
-        st = send_until(Task(task_id=3, robot=0, kind="goto", vertex=0, landmarks=ids,
-                             bearings=[recorded[i] for i in ids],
-                             ref_offsets=[home_th - 0.0 for _ in ids], timeout_s=60),
-                        lambda m: m.task_id == 3 and m.task_state != "running"
-                        and m.state == "holding", 60)
+        st = send(Task(task_id=3, robot=0, kind="goto", vertex=0, landmarks=ids,
+                       bearings=[recorded[i] for i in ids],
+                       ref_offsets=[home_th - 0.0 for _ in ids], timeout_s=60),
+                  lambda m: m.task_id == 3 and m.task_state != "running"
+                  and m.state == "holding", 60)
         assert st.task_state == "done", (st.reason, st)
         time.sleep(0.3)
-        last = truth.all()[-1]
-        k = last.ids.index(0)
-        err = math.hypot(last.x[k] - home_xy[0], last.y[k] - home_xy[1])
-        assert err < 0.05, (err, home_xy, (last.x[k], last.y[k]))
-        status.sub.undeclare()
-        truth.sub.undeclare()
-    finally:
-        s.close()
-    agent.signal(signal.SIGINT)
-    assert agent.wait(15) == 0
+        x, y, _ = _pose0(truth)
+        err = math.hypot(x - home_xy[0], y - home_xy[1])
+        assert err < 0.05, (err, home_xy, (x, y))
 
 
 def test_deploy_with_scale_correction_in_the_real_world(procs, zargs, router, tmp_path):
     """Deploy to the assumed-geometry apex of a 0.6 m edge, then scale correction pushes the
     robot out until a link breaks and backs it up until both are back: it ends just inside
     rv of both references."""
-    swarm = zargs[zargs.index("--swarm") + 1]
-    keys = Keys(swarm)
     cfg = tmp_path / "deploy.toml"
     spawn = ('spawn = [\n  {robot = 0, pose = [1.2, 1.5, 0.0]},\n'
              '  {robot = 1, pose = [1.0, 1.2, 0.0]},\n  {robot = 2, pose = [1.0, 1.8, 0.0]},\n]')
     text = CONFIG[:CONFIG.index("spawn = [")] + spawn + "\n"
     cfg.write_text(text)
-    world = procs.swarmcover("world", cfg, *zargs)
-    world.wait_line("READY world", timeout=60)
-    agent = procs.swarmcover("agent", "--id", 0, *zargs)
-    agent.wait_line("READY agent 0", timeout=40)
-    s = client_session(router, swarm)
-    try:
-        status = Latest(s, keys.status(0), Status)
-        truth = Latest(s, keys.truth, Truth)
+    with _world_and_agent(procs, zargs, router, cfg) as (send, status, truth, _):
         apex = (1.0 + 0.6 * math.sqrt(3) / 2, 1.5)
         bearings = [math.atan2(1.2 - apex[1], 1.0 - apex[0]),
                     math.atan2(1.8 - apex[1], 1.0 - apex[0])]
         task = Task(task_id=1, robot=0, kind="deploy", vertex=9, landmarks=[1, 2],
                     bearings=bearings, scale_correct=True, timeout_s=60)
-        end = time.monotonic() + 90
-        st = None
-        while time.monotonic() < end:
-            s.put(keys.task(0), task.encode())
-            try:
-                st = status.wait(lambda m: m.task_id == 1 and m.task_state != "running", 2.0)
-                break
-            except AssertionError:
-                continue
-        assert st is not None and st.task_state == "done", st
+        st = send(task, lambda m: m.task_id == 1 and m.task_state != "running", 90)
+        assert st.task_state == "done", st
         assert any(m.state == "deploying" for m in status.all())
         time.sleep(0.3)
-        last = truth.all()[-1]
-        k = last.ids.index(0)
-        d1 = math.hypot(last.x[k] - 1.0, last.y[k] - 1.2)
-        d2 = math.hypot(last.x[k] - 1.0, last.y[k] - 1.8)
+        x, y, _ = _pose0(truth)
+        d1 = math.hypot(x - 1.0, y - 1.2)
+        d2 = math.hypot(x - 1.0, y - 1.8)
         # out until a link broke (rv), then back 0.12 rv along the bisector: ~ rv - eps
         assert 0.83 < max(d1, d2) < 0.93, (d1, d2)
-        assert abs(last.y[k] - 1.5) < 0.05
-        status.sub.undeclare()
-        truth.sub.undeclare()
-    finally:
-        s.close()
-    agent.signal(signal.SIGINT)
-    assert agent.wait(15) == 0
+        assert abs(y - 1.5) < 0.05

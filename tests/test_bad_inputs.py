@@ -147,23 +147,35 @@ def _config(tmp_path: Path, make) -> Path:
     return p
 
 
-@pytest.mark.parametrize("row", ROWS, ids=[r[0] for r in ROWS])
-def test_bad_input_exits_2_naming_the_field(tmp_path, row):
-    name, make, flags, needles = row
-    (tmp_path / "afile").write_text("a file, not a folder")
+def prepare(tmp: Path, make: str, flags) -> tuple[socket.socket, dict, list[str]]:
+    """The stage for one row in the folder ``tmp``: a file where a folder is expected, a busy
+    port (the returned socket: close it) and a closed one. Returns (busy socket, the
+    substitutions for the row's flags and needles, the ``swarmcover run`` argv)."""
+    (tmp / "afile").write_text("a file, not a folder")
     busy = socket.socket()
     busy.bind(("127.0.0.1", 0))
     busy.listen(1)
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        closed = s.getsockname()[1]          # a port nobody listens on
-    subs = dict(tmp=str(tmp_path), busy=str(busy.getsockname()[1]), closed=str(closed))
     try:
-        conf = _config(tmp_path, make)
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            closed = s.getsockname()[1]          # a port nobody listens on
+        subs = dict(tmp=str(tmp), busy=str(busy.getsockname()[1]), closed=str(closed))
         flags = [f.format(**subs) for f in flags]
         if "--out" not in flags:
-            flags += ["--out", str(tmp_path / "run")]
-        argv = SWARMCOVER + ["run", str(conf), "--quiet", "--wall-timeout", "15"] + flags
+            flags += ["--out", str(tmp / "run")]
+        argv = SWARMCOVER + ["run", str(_config(tmp, make)), "--quiet", "--wall-timeout",
+                             "15"] + flags
+    except BaseException:
+        busy.close()
+        raise
+    return busy, subs, argv
+
+
+@pytest.mark.parametrize("row", ROWS, ids=[r[0] for r in ROWS])
+def test_bad_input_exits_2_naming_the_field(tmp_path, row):
+    name, make, flags, needles = row
+    busy, subs, argv = prepare(tmp_path, make, flags)
+    try:
         p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                              cwd=str(ROOT), start_new_session=True)
         try:

@@ -13,7 +13,7 @@ import pytest
 
 from bus.messages import Clock, CmdVel, Sense, Status, decode
 from coordinator.node import ClockTrust, TickSync
-from procs import client_session, free_port
+from procs import client_session, free_port, wait_cycle
 
 KEYS = ("robots_used", "robots_spawned", "cycles", "sim_time_s", "coverage", "mean_spacing")
 
@@ -42,18 +42,6 @@ def _inproc(config: str, seed: int) -> dict:
                         dict(certified=res.certified, cycles=res.cycles,
                              sim_time_s=res.sim_time_s, robots_spawned=res.robots_spawned))
     return {k: s[k] for k in KEYS} | {"certified": s["certified"]}
-
-
-def _wait_cycle(out: Path, cycle: int, timeout: float) -> None:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        f = out / "cycles.jsonl"
-        if f.exists():
-            rows = [json.loads(x) for x in f.read_text().splitlines() if x.strip()]
-            if rows and rows[-1]["cycle"] >= cycle:
-                return
-        time.sleep(0.2)
-    raise AssertionError(f"cycle {cycle} not reached in {timeout} s")
 
 
 def _same(a: dict, b: dict) -> bool:
@@ -123,7 +111,7 @@ def test_tiny_twice_distributed_with_a_forged_clock_and_in_process_agree(procs, 
     port_b = free_port()
     pa = _run(procs, a, "configs/tiny.toml", 0, free_port())
     pb = _run(procs, b, "configs/tiny.toml", 0, port_b)
-    _wait_cycle(b, 2, 240)
+    wait_cycle(b, 2, 240)
     s = client_session(f"tcp/127.0.0.1:{port_b}", "det")
     try:
         pub = s.declare_publisher("sc/det/world/clock")

@@ -165,6 +165,17 @@ def _guard(r: dict, what: str) -> None:
                     f"coordinator is still being tuned")
 
 
+def _progressed_and_certified(r: dict, over: str, fault: str) -> None:
+    """A run over lossy links must progress; certifying within LOSSY_BOUND_S is guarded (a
+    skip that says how far it got), and a certified run must end with 0."""
+    assert r.get("sim_time_s", 0) > 0, f"the world made no progress over {over}"
+    if not r["certified"]:
+        pytest.skip(f"{fault}: reached cycle {r.get('cycles')} in "
+                    f"{LOSSY_BOUND_S:.0f} s without certifying yet (lockstep stalls the "
+                    f"whole swarm on every lost segment; see bench/faults.py)")
+    assert r["rc"] == 0
+
+
 def test_a_router_restarted_mid_run_the_processes_reconnect(tmp_path):
     r = restart_run(tmp_path, down_s=1.0, wall_timeout=RUN_BOUND_S, config=RUN_CONFIG)
     row = r.get("cycle_at_kill")
@@ -197,12 +208,7 @@ def test_a_run_over_lossy_delayed_links_still_certifies(tmp_path):
     r = lossy_run(tmp_path, loss=0.01, delay_s=0.005, jitter_s=0.002, wall_timeout=LOSSY_BOUND_S,
                   config=RUN_CONFIG)
     assert r["link"]["lost"] > 0 and r["link"]["connections"] >= 4
-    assert r.get("sim_time_s", 0) > 0, "the world made no progress over the lossy links"
-    if not r["certified"]:
-        pytest.skip(f"1% loss, 5 ms delay: reached cycle {r.get('cycles')} in "
-                    f"{LOSSY_BOUND_S:.0f} s without certifying yet (lockstep stalls the "
-                    f"whole swarm on every lost segment; see bench/faults.py)")
-    assert r["rc"] == 0
+    _progressed_and_certified(r, "the lossy links", "1% loss, 5 ms delay")
 
 
 def test_a_run_with_real_packet_loss_between_namespaces_still_certifies(tmp_path):
@@ -220,9 +226,4 @@ def test_a_run_with_real_packet_loss_between_namespaces_still_certifies(tmp_path
         r = netns_loss_run(tmp_path, 0.02, wall_timeout=LOSSY_BOUND_S, config=RUN_CONFIG)
     except OSError as e:
         pytest.skip(f"cannot build namespaces with packet loss here: {e}")
-    assert r.get("sim_time_s", 0) > 0, "the world made no progress over the lossy link"
-    if not r["certified"]:
-        pytest.skip(f"2% real packet loss: reached cycle {r.get('cycles')} in "
-                    f"{LOSSY_BOUND_S:.0f} s without certifying yet (lockstep stalls the "
-                    f"whole swarm on every lost segment; see bench/faults.py)")
-    assert r["rc"] == 0
+    _progressed_and_certified(r, "the lossy link", "2% real packet loss")

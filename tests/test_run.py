@@ -5,12 +5,11 @@ from __future__ import annotations
 import json
 import os
 import signal
-import time
 from pathlib import Path
 
 import pytest
 
-from procs import free_port, pids_with
+from procs import free_port, no_leftovers, pids_with, wait_cycle
 
 
 def _run(procs, out: Path, *extra):
@@ -26,25 +25,6 @@ def _of_run(out: Path, needle: str) -> list[int]:
 
 def _summary(out: Path) -> dict:
     return json.loads((out / "summary.json").read_text())
-
-
-def _wait_cycle(out: Path, cycle: int, timeout: float) -> dict:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        f = out / "cycles.jsonl"
-        if f.exists():
-            rows = [json.loads(x) for x in f.read_text().splitlines() if x.strip()]
-            if rows and rows[-1]["cycle"] >= cycle:
-                return rows[-1]
-        time.sleep(0.2)
-    raise AssertionError(f"cycle {cycle} not reached in {timeout} s")
-
-
-def _no_leftovers(out: Path, timeout: float = 10.0) -> None:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end and pids_with(str(out)):
-        time.sleep(0.2)
-    assert not pids_with(str(out)), "processes of the run are still alive"
 
 
 @pytest.mark.timeout(300)
@@ -66,21 +46,21 @@ def test_run_certifies_and_writes_the_report(procs, tmp_path):
     assert [r["cycle"] for r in rows] == sorted(r["cycle"] for r in rows)
     logs = {f.name for f in (out / "logs").iterdir()}
     assert {"router.log", "world.log", "coordinator.log", "agent-0.log"} <= logs
-    _no_leftovers(out)
+    no_leftovers(out)
 
 
 @pytest.mark.timeout(120)
 def test_ctrl_c_stops_every_process(procs, tmp_path):
     out = tmp_path / "run"
     p = _run(procs, out)
-    _wait_cycle(out, 2, 60)
+    wait_cycle(out, 2, 60)
     assert len(pids_with(str(out))) >= 4  # router, world, coordinator, agents
     p.signal(signal.SIGINT)
     assert p.wait(40) == 130
     # the report survives the interruption, with its reason, as strict JSON
     s = json.loads((out / "summary.json").read_text(), parse_constant=lambda c: 1 / 0)
     assert s["stop_reason"] == "interrupted" and s["certified"] is False and s["cycles"] >= 2
-    _no_leftovers(out)
+    no_leftovers(out)
 
 
 @pytest.mark.timeout(300)
@@ -89,11 +69,11 @@ def test_killed_agents_and_coordinator_are_healed(procs, tmp_path):
     run restarts it, it rebuilds from the agents' statuses, and the holes are refilled."""
     out = tmp_path / "run"
     p = _run(procs, out)
-    _wait_cycle(out, 8, 150)
+    wait_cycle(out, 8, 150)
     agent = _of_run(out, "agent --id 3 ")
     assert len(agent) == 1, "agent 3 is not running"
     os.kill(agent[0], signal.SIGKILL)
-    _wait_cycle(out, 10, 120)
+    wait_cycle(out, 10, 120)
     coord = _of_run(out, "swarmcover coordinator")
     assert len(coord) == 1
     os.kill(coord[0], signal.SIGKILL)
@@ -108,7 +88,7 @@ def test_killed_agents_and_coordinator_are_healed(procs, tmp_path):
     log = (out / "logs" / "coordinator.log").read_text()
     assert "robot 3 failed" in log
     assert "resuming with" in log
-    _no_leftovers(out)
+    no_leftovers(out)
 
 
 def test_live_agents_plan_with_the_bridge_limits_and_a_bad_bridge_stops_run_first(tmp_path,

@@ -10,32 +10,13 @@ from pathlib import Path
 
 import pytest
 
-from procs import client_session, free_port, pids_with
+from procs import client_session, free_port, no_leftovers, pids_with, wait_cycle
 
 
 def _strict(path: Path) -> dict:
     def bad(c):
         raise ValueError(f"summary.json holds {c}")
     return json.loads(path.read_text(), parse_constant=bad)
-
-
-def _wait_cycle(out: Path, cycle: int, timeout: float) -> dict:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        f = out / "cycles.jsonl"
-        if f.exists():
-            rows = [json.loads(x) for x in f.read_text().splitlines() if x.strip()]
-            if rows and rows[-1]["cycle"] >= cycle:
-                return rows[-1]
-        time.sleep(0.2)
-    raise AssertionError(f"cycle {cycle} not reached in {timeout} s")
-
-
-def _no_leftovers(out: Path, timeout: float = 10.0) -> None:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end and pids_with(str(out)):
-        time.sleep(0.2)
-    assert not pids_with(str(out)), "processes of the run are still alive"
 
 
 def _forged_certificate():
@@ -57,7 +38,7 @@ def test_forged_certificate_and_spawn_are_refused_and_the_run_ends_with_the_true
     ep = f"tcp/127.0.0.1:{port}"
     p = procs.swarmcover("run", "configs/tiny.toml", "--out", out, "--quiet", "--port", port,
                          "--wall-timeout", "45")
-    _wait_cycle(out, 1, 60)
+    wait_cycle(out, 1, 60)
     ready = next(ln for ln in (out / "logs" / "coordinator.log").read_text().splitlines()
                  if "READY coordinator" in ln)
     zid = ready.split("zid ")[1].split()[0]
@@ -115,7 +96,7 @@ def test_forged_certificate_and_spawn_are_refused_and_the_run_ends_with_the_true
     assert sum(n for k, n in refused.items() if k.startswith("spawn:")) >= 1, refused
     assert not (out / "logs" / "agent-900.log").exists()
     assert s["robots_max_from"].startswith("map:") and s["euler_bound"] > 0
-    _no_leftovers(out)
+    no_leftovers(out)
 
 
 @pytest.mark.timeout(90)
@@ -133,7 +114,7 @@ def test_an_agent_failing_at_start_ends_the_run_with_its_error(procs, tmp_path):
     s = _strict(out / "summary.json")
     assert s["stop_reason"] == "agents_failed" and s["certified"] is False
     assert s["exit_code"] == 2
-    _no_leftovers(out)
+    no_leftovers(out)
 
 
 @pytest.mark.timeout(150)
@@ -149,7 +130,7 @@ def test_robots_max_ends_the_run_uncertified_with_the_reason(procs, tmp_path):
     assert s["ratio"] is None and s["ratio_same_spacing"] is None
     # the progress line and the last line say why
     assert "NOT certified (robots_max" in p.output()
-    _no_leftovers(out)
+    no_leftovers(out)
 
 
 @pytest.mark.timeout(90)
@@ -157,7 +138,7 @@ def test_a_dead_world_still_leaves_a_summary(procs, tmp_path):
     out = tmp_path / "run"
     p = procs.swarmcover("run", "configs/tiny.toml", "--out", out, "--quiet", "--port",
                          free_port())
-    _wait_cycle(out, 1, 60)
+    wait_cycle(out, 1, 60)
     mine = set(pids_with(str(out)))
     world = [pid for pid in pids_with("swarmcover world") if pid in mine]
     assert len(world) == 1
@@ -167,4 +148,4 @@ def test_a_dead_world_still_leaves_a_summary(procs, tmp_path):
     s = _strict(out / "summary.json")
     assert s["stop_reason"] == "world_died" and "world" in s["stop_detail"]
     assert s["cycles"] >= 1
-    _no_leftovers(out)
+    no_leftovers(out)

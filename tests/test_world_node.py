@@ -2,6 +2,7 @@
 bad input, twins, and lockstep determinism with a scripted command publisher."""
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import time
@@ -175,14 +176,32 @@ def test_stale_command_stops_the_robot(procs, router, zargs, tmp_path):
         s.close()
 
 
-def test_a_silent_agent_delays_ticks_but_never_stalls(procs, router, zargs, tmp_path):
+@contextlib.contextmanager
+def _world_waiting_for_robot_1(procs, router, zargs, tmp_path, timeout: float, ticks: int):
+    """A lockstep world of ``ticks`` ticks that spawns robot 1, whose agent is present but
+    silent (only its liveliness token, from this test's session). Yields (world, truth
+    output path, leave): leave() withdraws the token (once)."""
     keys = Keys(swarm_of(zargs))
     s = client_session(router, keys.swarm)
     token = s.liveliness().declare_token(keys.alive("robot", 1))
+    left = []
+
+    def leave():
+        if not left:
+            left.append(True)
+            token.undeclare()
     try:
         out = tmp_path / "truth.json"
-        cfg = config(tmp_path, timeout=0.3, extra="spawn = [{robot = 1}]")
-        w = procs.swarmcover("world", cfg, *zargs, "--max-ticks", 4, "--truth-out", out)
+        cfg = config(tmp_path, timeout=timeout, extra="spawn = [{robot = 1}]")
+        w = procs.swarmcover("world", cfg, *zargs, "--max-ticks", ticks, "--truth-out", out)
+        yield w, out, leave
+    finally:
+        leave()
+        s.close()
+
+
+def test_a_silent_agent_delays_ticks_but_never_stalls(procs, router, zargs, tmp_path):
+    with _world_waiting_for_robot_1(procs, router, zargs, tmp_path, 0.3, 4) as (w, out, _):
         t0 = time.monotonic()
         assert w.wait(timeout=40) == 0
         assert time.monotonic() - t0 >= 4 * 0.3
@@ -191,9 +210,6 @@ def test_a_silent_agent_delays_ticks_but_never_stalls(procs, router, zargs, tmp_
         # one only if the token was already in the world's start-up snapshot: under load
         # it can arrive a tick late)
         assert summary["ticks"] == 4 and summary["late"] >= 3
-    finally:
-        token.undeclare()
-        s.close()
 
 
 def scripted_run(procs, router, tmp_path, tag: str) -> dict:
@@ -262,27 +278,16 @@ def test_bad_config_exits_2_naming_the_field(procs, tmp_path):
 
 
 def test_an_agent_that_leaves_is_no_longer_waited_for(procs, router, zargs, tmp_path):
-    keys = Keys(swarm_of(zargs))
-    s = client_session(router, keys.swarm)
-    token = s.liveliness().declare_token(keys.alive("robot", 1))
-    try:
-        out = tmp_path / "truth.json"
-        cfg = config(tmp_path, timeout=20.0, extra="spawn = [{robot = 1}]")
-        w = procs.swarmcover("world", cfg, *zargs, "--max-ticks", 8, "--truth-out", out)
+    with _world_waiting_for_robot_1(procs, router, zargs, tmp_path, 20.0, 8) as (w, out, leave):
         w.wait_line("READY world", timeout=30)
         time.sleep(0.3)
         assert w.p.poll() is None                 # tick 0 waits for agent 1
-        token.undeclare()
-        token = None
+        leave()
         t0 = time.monotonic()
         assert w.wait(timeout=15) == 0
         assert time.monotonic() - t0 < 10         # far less than one 20 s timeout
         summary = json.loads(out.read_text())["summary"]
         assert summary["ticks"] == 8 and summary["late"] == 0
-    finally:
-        if token is not None:
-            token.undeclare()
-        s.close()
 
 
 def test_lockstep_barrier_with_a_coordinator(procs, router, zargs, tmp_path):

@@ -146,6 +146,41 @@ class RunConfig:
 class _Ctx(Checker):
     """The world's sections use the common checks (finite numbers, simple polygons)."""
 
+    def tables(self, d: dict, key: str, expected: str):
+        """(name, table) for each table of the list ``d[key]`` (absent: none)."""
+        v = d.get(key, [])
+        if not isinstance(v, list):
+            raise self.err(key, v, expected)
+        for k, t in enumerate(v):
+            name = f"{key}[{k}]"
+            self.table(name, t)
+            yield name, t
+
+
+class _Section(_Ctx):
+    """A section whose fields are those of a dataclass: unknown keys are refused, and each
+    field is read with the dataclass's default when the section leaves it out."""
+
+    def __init__(self, file: str, section: str, d: dict, cls: type):
+        super().__init__(file, section)
+        self.unknown(d, {f.name for f in fields(cls)})
+        self.d, self.dflt = d, cls()
+
+    def _get(self, name: str):
+        return self.d.get(name, getattr(self.dflt, name))
+
+    def field_num(self, name: str, lo: float, hi: float, **open_ends) -> float:
+        return self.num(name, self._get(name), lo, hi, **open_ends)
+
+    def field_int(self, name: str, lo: int, hi: int) -> int:
+        return self.int_(name, self._get(name), lo, hi)
+
+    def field_bool(self, name: str) -> bool:
+        return self.bool_(name, self._get(name))
+
+    def field_choice(self, name: str, choices) -> str:
+        return self.choice(name, self._get(name), choices)
+
 
 # --------------------------------------------------------------------------- sections
 
@@ -172,12 +207,7 @@ def _parse_map(d: dict, file: str, base_dir: str) -> MapConfig:
     else:
         raise ctx.err("boundary", None, "missing: give boundary (a polygon) or ros_map")
     obstacles = []
-    obs = d.get("obstacles", [])
-    if not isinstance(obs, list):
-        raise ctx.err("obstacles", obs, "expected a list of tables")
-    for k, o in enumerate(obs):
-        name = f"obstacles[{k}]"
-        ctx.table(name, o)
+    for name, o in ctx.tables(d, "obstacles", "expected a list of tables"):
         t = o.get("type")
         if t == "rect":
             ctx.unknown(o, {"type", "min", "max"})
@@ -198,12 +228,7 @@ def _parse_map(d: dict, file: str, base_dir: str) -> MapConfig:
         else:
             raise ctx.err(f"{name}.type", t, "expected rect, circle or polygon")
     sources = []
-    src = d.get("sources", [])
-    if not isinstance(src, list):
-        raise ctx.err("sources", src, "expected a list of tables {x, y, theta}")
-    for k, s in enumerate(src):
-        name = f"sources[{k}]"
-        ctx.table(name, s)
+    for name, s in ctx.tables(d, "sources", "expected a list of tables {x, y, theta}"):
         ctx.unknown(s, {"x", "y", "theta"})
         if "x" not in s or "y" not in s:
             raise ctx.err(name, s, "needs x and y")
@@ -220,42 +245,32 @@ def _parse_map(d: dict, file: str, base_dir: str) -> MapConfig:
 
 
 def _parse_robots(d: dict, file: str) -> RobotsConfig:
-    ctx = _Ctx(file, "robots")
-    ctx.unknown(d, {f.name for f in fields(RobotsConfig)})
-    dflt = RobotsConfig()
+    sec = _Section(file, "robots", d, RobotsConfig)
     return RobotsConfig(
-        radius=ctx.num("radius", d.get("radius", dflt.radius), 0.0, 100.0, lo_open=True),
-        kind=ctx.choice("kind", d.get("kind", dflt.kind), ROBOT_KINDS),
-        v_max=ctx.num("v_max", d.get("v_max", dflt.v_max), 0.0, 100.0, lo_open=True),
-        w_max=ctx.num("w_max", d.get("w_max", dflt.w_max), 0.0, 100.0, lo_open=True),
-        actuation_noise=ctx.num("actuation_noise", d.get("actuation_noise", 0.0), 0.0, 1.0))
+        radius=sec.field_num("radius", 0.0, 100.0, lo_open=True),
+        kind=sec.field_choice("kind", ROBOT_KINDS),
+        v_max=sec.field_num("v_max", 0.0, 100.0, lo_open=True),
+        w_max=sec.field_num("w_max", 0.0, 100.0, lo_open=True),
+        actuation_noise=sec.field_num("actuation_noise", 0.0, 1.0))
 
 
 def _parse_sensing(d: dict, file: str) -> SensingConfig:
-    ctx = _Ctx(file, "sensing")
-    ctx.unknown(d, {f.name for f in fields(SensingConfig)})
-    dflt = SensingConfig()
+    sec = _Section(file, "sensing", d, SensingConfig)
     return SensingConfig(
-        rate_hz=ctx.num("rate_hz", d.get("rate_hz", dflt.rate_hz), 0.0, 1e4, lo_open=True),
-        noise_deg=ctx.num("noise_deg", d.get("noise_deg", dflt.noise_deg), 0.0, 90.0),
-        dropout=ctx.num("dropout", d.get("dropout", dflt.dropout), 0.0, 1.0),
-        robots_occlude=ctx.bool_("robots_occlude", d.get("robots_occlude", False)),
-        n_touch=ctx.int_("n_touch", d.get("n_touch", dflt.n_touch), 1, 360),
-        touch_skin=ctx.num("touch_skin", d.get("touch_skin", dflt.touch_skin), 0.0, 10.0))
+        rate_hz=sec.field_num("rate_hz", 0.0, 1e4, lo_open=True),
+        noise_deg=sec.field_num("noise_deg", 0.0, 90.0),
+        dropout=sec.field_num("dropout", 0.0, 1.0),
+        robots_occlude=sec.field_bool("robots_occlude"),
+        n_touch=sec.field_int("n_touch", 1, 360),
+        touch_skin=sec.field_num("touch_skin", 0.0, 10.0))
 
 
 def _parse_world(d: dict, file: str) -> WorldConfig:
-    ctx = _Ctx(file, "world")
-    ctx.unknown(d, {f.name for f in fields(WorldConfig)})
-    dflt = WorldConfig()
+    ctx = _Section(file, "world", d, WorldConfig)
     spawn = []
-    sp = d.get("spawn", [])
-    if not isinstance(sp, list):
-        raise ctx.err("spawn", sp, "expected a list of tables {robot, source, kind, live, pose}")
     seen = set()
-    for k, s in enumerate(sp):
-        name = f"spawn[{k}]"
-        ctx.table(name, s)
+    for name, s in ctx.tables(d, "spawn",
+                              "expected a list of tables {robot, source, kind, live, pose}"):
         ctx.unknown(s, {"robot", "source", "kind", "live", "pose"})
         if "robot" not in s:
             raise ctx.err(name, s, "needs robot (an id)")
@@ -276,17 +291,14 @@ def _parse_world(d: dict, file: str) -> WorldConfig:
             kind=ctx.choice(f"{name}.kind", s["kind"], ROBOT_KINDS) if "kind" in s else None,
             live=ctx.bool_(f"{name}.live", s.get("live", False)), pose=pose))
     return WorldConfig(
-        dt=ctx.num("dt", d.get("dt", dflt.dt), 0.0, 10.0, lo_open=True),
-        mode=ctx.choice("mode", d.get("mode", dflt.mode), MODES),
-        rtf=ctx.num("rtf", d.get("rtf", dflt.rtf), 0.0, 1e4, lo_open=True),
-        seed=ctx.int_("seed", d.get("seed", dflt.seed), 0, 2**63 - 1),
-        tick_timeout_s=ctx.num("tick_timeout_s", d.get("tick_timeout_s", dflt.tick_timeout_s),
-                               0.0, 3600.0, lo_open=True),
-        stale_cmd_s=ctx.num("stale_cmd_s", d.get("stale_cmd_s", dflt.stale_cmd_s), 0.0, 1e6,
-                            lo_open=True),
-        pose_rate_hz=ctx.num("pose_rate_hz", d.get("pose_rate_hz", dflt.pose_rate_hz), 0.0,
-                             1e4),
-        substeps=ctx.int_("substeps", d.get("substeps", dflt.substeps), 1, 100),
+        dt=ctx.field_num("dt", 0.0, 10.0, lo_open=True),
+        mode=ctx.field_choice("mode", MODES),
+        rtf=ctx.field_num("rtf", 0.0, 1e4, lo_open=True),
+        seed=ctx.field_int("seed", 0, 2**63 - 1),
+        tick_timeout_s=ctx.field_num("tick_timeout_s", 0.0, 3600.0, lo_open=True),
+        stale_cmd_s=ctx.field_num("stale_cmd_s", 0.0, 1e6, lo_open=True),
+        pose_rate_hz=ctx.field_num("pose_rate_hz", 0.0, 1e4),
+        substeps=ctx.field_int("substeps", 1, 100),
         spawn=tuple(spawn))
 
 

@@ -1,0 +1,39 @@
+"""What the benchmarks that start real processes share: progress on stderr, a free port,
+a process's CPU time, waiting for a line of a child's stdout."""
+from __future__ import annotations
+
+import os
+import socket
+import sys
+import time
+
+CLK = os.sysconf("SC_CLK_TCK")
+
+
+def eprint(*a):
+    print(*a, file=sys.stderr, flush=True)
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def cpu_seconds(pid: int) -> float:
+    """utime + stime of a process (s), threads included."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLK
+
+
+def wait_line(proc, needle, timeout=30.0) -> str:
+    """The first line of ``proc``'s stdout (a text pipe) that holds ``needle``."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        line = proc.stdout.readline()
+        if not line:
+            break
+        if needle in line:
+            return line
+    raise RuntimeError(f"no {needle!r} from {proc.args}")
