@@ -59,8 +59,13 @@ _DEEP = 2.0 * math.pi / 3.0
 # Single-file ends offer every direction of their open wedge 60 deg apart that keeps this
 # far from every neighbour (a little under 60 deg, for bearing noise).
 _SINGLE_CLEAR = math.radians(50.0)
-# Convex-corner marks (spec 3.3 ii) make a side a probing candidate rather than closing it.
-_CORNER_PROBES = True
+# Convex-corner marks (spec 3.3 ii) make a side a probing candidate rather than closing it
+# (True), or close it as inferred 'convex_corner' (False). Off: bench/truth.py seed 0 maps
+# 0-12 with it on (and _CLEAR_INFERS on) ran clutter maps 10, 11, 12 to the robot cap (99,
+# 81, 80 robots; clear probes off box corners place robots that form new corners), so
+# tests/test_truth.py cannot pass either way; map 11 (a free-standing box) is then still a
+# false certificate by this rule (issue 21 item 3 open).
+_CORNER_PROBES = False
 # A side whose probes are all done, some clear (room found, its robot stayed) while the side
 # is still one-sided: False leaves it frontier with no deployment (uncertified); True closes
 # it as inferred ('probe_clear').

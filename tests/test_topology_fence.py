@@ -186,10 +186,22 @@ def _corner(angle_deg):
     return _fence(P, discs=[(mid[0], mid[1], 0.05)])  # an obstacle corner hides j from k
 
 
-def test_convex_corner_below_threshold_makes_both_edges_probe_then_close():
+def test_convex_corner_below_threshold_marks_both_edges_obstacle():
+    cx, f = _corner(50)
+    assert int(cx.edge_index(1, 2)) < 0  # occluded
+    assert {(0, 1), (0, 2)} <= _pairs(cx, f.obstacle)
+    for e in (int(cx.edge_index(0, 1)), int(cx.edge_index(0, 2))):
+        assert f.by_index[e].sides[0].reason == "convex_corner"
+        assert e not in f.frontier.tolist()
+    assert all(d.edge not in ((0, 1), (0, 2)) for d in f.deployments.get(0, ()))
+
+
+def test_convex_corner_sides_can_be_probed_before_they_close(monkeypatch):
     """The convex-corner rule (spec 3.3 ii) only makes its sides candidates (issue 21,
     bench/truth.py map 11: a free-standing box broke it): they are probed, and close on
     evidence once every probe touched."""
+    import coordinator.fence as fence_mod
+    monkeypatch.setattr(fence_mod, "_CORNER_PROBES", True)
     cx, f = _corner(50)
     assert int(cx.edge_index(1, 2)) < 0  # occluded
     es = (int(cx.edge_index(0, 1)), int(cx.edge_index(0, 2)))
