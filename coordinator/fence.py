@@ -169,7 +169,7 @@ class Fence:
     deployments: node id -> deployments available at that robot, best clearance first.
     frontier_vertices / obstacle_vertices / fence_vertices: node ids.
     inferred: (edge id, why) for every obstacle side closed by inference rather than by
-      probes ('convex_corner', 'forced'), by edge id.
+      probes ('convex_corner', 'forced', 'probe_clear'), by edge id.
     """
 
     edges: tuple[FenceEdge, ...]
@@ -399,9 +399,14 @@ def detect_fence(
       L/n <= s apart and L/n - r < s from the ends, so they alone pass every opening
       >= door_min_rv within the edge's span).
       Until then the side stays frontier (reason 'probing') and offers only its missing
-      probes as deployments (kind 'probe', from either end for interior ones). An interior
-      probe in ``probe_unreachable`` (its approach failed repeatedly) counts as done, but a
-      side closed with one is reported as inferred ('probe_unreachable').
+      probes as deployments (kind 'probe', from either end for interior ones). A probe in
+      ``probe_clear`` found room (its robot stayed there) and is never offered again; an
+      interior probe given up from one end in ``probe_unreachable`` (its approach leg kept
+      failing) is offered from the other end only. Neither is evidence of a wall: a side
+      whose probes are all touched, clear or unreached from both ends, with one not
+      touched, stays frontier ('probing') with no deployment, and the run ends uncertified
+      (``_CLEAR_INFERS`` instead closes it as inferred 'probe_clear' when some probe was
+      clear and none is left).
     Inferred closures (no probe): the convex-corner / occlusion rule (pi/3 - 2 beta, reason
     'convex_corner') and ``forced_obstacle`` ('forced'); ``Fence.inferred`` lists them.
     Guarantee: with edges <= rv, for a side closed on evidence, every opening at least
@@ -417,7 +422,9 @@ def detect_fence(
       its deployments within 30 deg of a failed direction are dropped (probes excepted).
     probe_failures: keys (u, v, sigma, fraction from u) of interior probes that touched.
     probe_fracs: fractions where probes go (default ``evidence.probe_fractions()``).
-    probe_unreachable: keys of interior probes given up (their approach kept failing).
+    probe_unreachable: (u, v, sigma, fraction, end): interior probes given up from that
+      end (their approach kept failing); a bare 4-tuple key: given up from both ends.
+    probe_clear: keys of interior probes that found room (done, not offered again).
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
       e.g. edges reclassified after a failed test drive in an earlier cycle.
     default_bearing: first deployment direction (rad, body frame) of a robot with no
