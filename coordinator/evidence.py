@@ -109,7 +109,9 @@ class Evidence:
         self.records: list[DriveRecord] = []
         self._failed: dict[int, list[float]] = {}
         self._probes: set[ProbeKey] = set()
-        self._approach_fails: dict[ProbeKey, int] = {}
+        self._clear: set[ProbeKey] = set()
+        # (probe key, end it was driven from) -> approach legs that failed from that end
+        self._approach_fails: dict[tuple[ProbeKey, int], int] = {}
 
     # ---------------------------------------------------------------- recording
     def record(self, dep, touched: bool, *, direction: float | None = None) -> DriveRecord:
@@ -123,22 +125,30 @@ class Evidence:
         rec = DriveRecord(int(dep.vertex), d, str(dep.kind), edge, int(dep.sigma), frac,
                           bool(touched))
         self.records.append(rec)
+        interior = rec.kind == "probe" and edge is not None and frac > 1e-9
         if touched:
-            if rec.kind == "probe" and edge is not None and frac > 1e-9:
+            if interior:
                 self._probes.add(probe_key(rec.vertex, edge, rec.sigma, frac))
             else:
                 self.add_failed_direction(rec.vertex, d)
+        elif interior:
+            # a clear interior probe found room (its robot stays there): that fraction is
+            # done, it is never offered again (re-offering it stacked robots: issue 21)
+            self._clear.add(probe_key(rec.vertex, edge, rec.sigma, frac))
         return rec
 
     def record_unreached(self, dep) -> int:
         """An interior probe whose approach leg failed (its robot never reached the point on
-        the edge: "via (...)"). Returns how often that probe has failed so; from
-        UNREACHED_LIMIT on it is given up (``probe_unreachable``): the side may close
-        without it, and is then reported as inferred ("probe_unreachable")."""
+        the edge: "via (...)"). Returns how often that probe has failed so from this end;
+        from UNREACHED_LIMIT on it is given up from this end (``probe_unreachable``). An
+        unreached probe is no evidence: the fence then offers it from the other end only,
+        and a probe given up from both ends leaves its side frontier with no deployment
+        (the run ends uncertified), never closed."""
         frac = float(getattr(dep, "via_frac", 0.0) or 0.0)
         if dep.edge is None or frac <= 1e-9:
             return 0
-        k = probe_key(int(dep.vertex), tuple(int(x) for x in dep.edge), int(dep.sigma), frac)
+        k = (probe_key(int(dep.vertex), tuple(int(x) for x in dep.edge), int(dep.sigma), frac),
+             int(dep.vertex))
         self._approach_fails[k] = self._approach_fails.get(k, 0) + 1
         return self._approach_fails[k]
 
@@ -161,16 +171,26 @@ class Evidence:
         return frozenset(k for k in self._probes
                          if present is None or (k[0] in present and k[1] in present))
 
-    def unreachable_probes(self, present: Container[int] | None = None) -> frozenset[ProbeKey]:
-        """Keys of interior probes whose approach failed UNREACHED_LIMIT times."""
-        return frozenset(k for k, n in self._approach_fails.items() if n >= self.UNREACHED_LIMIT
+    def clear_probes(self, present: Container[int] | None = None) -> frozenset[ProbeKey]:
+        """Keys of interior probes that found room: detect_fence's ``probe_clear``."""
+        return frozenset(k for k in self._clear
+                         if present is None or (k[0] in present and k[1] in present))
+
+    def unreachable_probes(self, present: Container[int] | None = None
+                           ) -> frozenset[tuple[int, int, int, float, int]]:
+        """(u, v, sigma, frac, end): interior probes whose approach from ``end`` failed
+        UNREACHED_LIMIT times (given up from that end only)."""
+        return frozenset((*k, end) for (k, end), n in self._approach_fails.items()
+                         if n >= self.UNREACHED_LIMIT
                          and (present is None or (k[0] in present and k[1] in present)))
 
     def fence_kwargs(self, present: Container[int] | None = None) -> dict:
         """Keyword arguments for detect_fence: test_drive_failures, probe_failures,
-        probe_unreachable and probe_fracs (restricted to nodes in ``present`` when given)."""
+        probe_clear, probe_unreachable and probe_fracs (restricted to nodes in ``present``
+        when given)."""
         return dict(test_drive_failures=self.failed_directions(present),
                     probe_failures=self.failed_probes(present),
+                    probe_clear=self.clear_probes(present),
                     probe_unreachable=self.unreachable_probes(present),
                     probe_fracs=self.fractions)
 

@@ -59,6 +59,21 @@ _DEEP = 2.0 * math.pi / 3.0
 # Single-file ends offer every direction of their open wedge 60 deg apart that keeps this
 # far from every neighbour (a little under 60 deg, for bearing noise).
 _SINGLE_CLEAR = math.radians(50.0)
+# Convex-corner marks (spec 3.3 ii) make a side a probing candidate rather than closing it
+# (True), or close it as inferred 'convex_corner' (False). Off: bench/truth.py seed 0 maps
+# 0-12 with it on (and _CLEAR_INFERS on) ran clutter maps 10, 11, 12 to the robot cap (99,
+# 81, 80 robots; clear probes off box corners place robots that form new corners), so
+# tests/test_truth.py cannot pass either way; map 11 (a free-standing box) is then still a
+# false certificate by this rule (issue 21 item 3 open).
+_CORNER_PROBES = False
+# A side whose probes are all done, some clear (room found, its robot stayed) while the side
+# is still one-sided: False leaves it frontier with no deployment (uncertified); True closes
+# it as inferred ('probe_clear'). bench/truth.py seed 0 (corner probes off): False, maps
+# 0-39: 14 fixed (all certified), 26 stuck (22 of them >= 99.9 % covered: unreached probes
+# from both ends, or a clear probe), 0 livelock, 0 cap, 46.2 robots; True, maps 0-36: 21
+# certified, 16 stuck, no false certificate beyond False's (#11 convex corner, #18 a 0.30
+# rv door). Off until a bigger sample shows 'probe_clear' costs no false certificate.
+_CLEAR_INFERS = False
 
 
 @dataclass(frozen=True)
@@ -158,7 +173,7 @@ class Fence:
     deployments: node id -> deployments available at that robot, best clearance first.
     frontier_vertices / obstacle_vertices / fence_vertices: node ids.
     inferred: (edge id, why) for every obstacle side closed by inference rather than by
-      probes ('convex_corner', 'forced'), by edge id.
+      probes ('convex_corner', 'forced', 'probe_clear'), by edge id.
     """
 
     edges: tuple[FenceEdge, ...]
@@ -366,6 +381,7 @@ def detect_fence(
     probe_failures=(),
     probe_fracs=None,
     probe_unreachable=(),
+    probe_clear=(),
 ) -> Fence:
     """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
 
@@ -387,9 +403,14 @@ def detect_fence(
       L/n <= s apart and L/n - r < s from the ends, so they alone pass every opening
       >= door_min_rv within the edge's span).
       Until then the side stays frontier (reason 'probing') and offers only its missing
-      probes as deployments (kind 'probe', from either end for interior ones). An interior
-      probe in ``probe_unreachable`` (its approach failed repeatedly) counts as done, but a
-      side closed with one is reported as inferred ('probe_unreachable').
+      probes as deployments (kind 'probe', from either end for interior ones). A probe in
+      ``probe_clear`` found room (its robot stayed there) and is never offered again; an
+      interior probe given up from one end in ``probe_unreachable`` (its approach leg kept
+      failing) is offered from the other end only. Neither is evidence of a wall: a side
+      whose probes are all touched, clear or unreached from both ends, with one not
+      touched, stays frontier ('probing') with no deployment, and the run ends uncertified
+      (``_CLEAR_INFERS`` instead closes it as inferred 'probe_clear' when some probe was
+      clear and none is left).
     Inferred closures (no probe): the convex-corner / occlusion rule (pi/3 - 2 beta, reason
     'convex_corner') and ``forced_obstacle`` ('forced'); ``Fence.inferred`` lists them.
     Guarantee: with edges <= rv, for a side closed on evidence, every opening at least
@@ -405,7 +426,9 @@ def detect_fence(
       its deployments within 30 deg of a failed direction are dropped (probes excepted).
     probe_failures: keys (u, v, sigma, fraction from u) of interior probes that touched.
     probe_fracs: fractions where probes go (default ``evidence.probe_fractions()``).
-    probe_unreachable: keys of interior probes given up (their approach kept failing).
+    probe_unreachable: (u, v, sigma, fraction, end): interior probes given up from that
+      end (their approach kept failing); a bare 4-tuple key: given up from both ends.
+    probe_clear: keys of interior probes that found room (done, not offered again).
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
       e.g. edges reclassified after a failed test drive in an earlier cycle.
     default_bearing: first deployment direction (rad, body frame) of a robot with no
@@ -556,9 +579,31 @@ def detect_fence(
     # probes (perpendicular drives from u and from v: a failed drive or a counted wall
     # contact within _FAILED_CONE of the perpendicular) and the interior probes (by key).
     fracs = tuple(probe_fracs) if probe_fracs is not None else probe_fractions()
-    pfail = {(int(a), int(b), int(c), round(float(d), 3)) for a, b, c, d in probe_failures}
-    punreach = {(int(a), int(b), int(c), round(float(d), 3)) for a, b, c, d in probe_unreachable}
+
+    def _key(k) -> tuple[int, int, int, float]:
+        return (int(k[0]), int(k[1]), int(k[2]), round(float(k[3]), 3))
+
+    pfail = {_key(k) for k in probe_failures}
+    pclear = {_key(k) for k in probe_clear}
+    # unreached: (key, end) given up from that end; a bare key (older callers): both ends
+    punreach: set[tuple[tuple[int, int, int, float], int | None]] = set()
+    for k in probe_unreachable:
+        punreach.add((_key(k), int(k[4]) if len(k) > 4 else None))
+
+    def _gave_up(key, end: int) -> bool:
+        return (key, end) in punreach or (key, None) in punreach
+
     d0_rv, dtd_rv = P.d0 / P.rv, P.d_td / P.rv
+
+    if _CORNER_PROBES:
+        # the convex-corner rule (spec 3.3 ii) assumes an obstacle corner sticking out of a
+        # wall; a free-standing box breaks it (clutter map 11 of bench/truth.py certified at
+        # 21.8 % coverage): its marks only make a side a candidate, probed like the others
+        for (e, sg), why in list(marks.items()):
+            if why == "convex_corner":
+                del marks[(e, sg)]
+                if e in open_sides and any(r[0] == sg for r in open_sides[e]):
+                    ends.setdefault((e, sg), "convex_corner")
 
     probing: dict[tuple[int, int], list[Deployment]] = {}
     for (e, sg), why in sorted(ends.items()):
@@ -568,9 +613,8 @@ def detect_fence(
         iu, iv = int(ids[u]), int(ids[v])
         pu = wrap(L.bearings(u)[v] + sg * math.pi / 2.0)
         pv = wrap(L.bearings(v)[u] - sg * math.pi / 2.0)
-        todo: list[Deployment] = []
         inner: list[Deployment] = []
-        skipped = False
+        n_clear = n_open = 0
         for g in fracs:
             if g <= 1e-9 or g >= 1.0 - 1e-9:
                 # the ends: their own failed drives / contacts made the side a candidate. The
@@ -579,21 +623,34 @@ def detect_fence(
                 # an end is not asked for (driving them placed 76 robots in covered corners
                 # of the small map, seed 0)
                 continue
-            elif (iu, iv, sg, round(g, 3)) in punreach and (iu, iv, sg, round(g, 3)) not in pfail:
-                skipped = True
-            elif (iu, iv, sg, round(g, 3)) not in pfail:
-                depth = probe_depth_rv(g, d0_rv, dtd_rv)
-                # either end can drive it; the nearer one first
-                a = Deployment(iu, pu, (iu, iv), sg, sg * math.pi / 2.0, L.clearance(u, pu),
-                               "probe", round(g, 3), depth)
-                b = Deployment(iv, pv, (iu, iv), sg, -sg * math.pi / 2.0, L.clearance(v, pv),
-                               "probe", round(1.0 - g, 3), depth)
-                inner.extend((a, b) if g <= 0.5 else (b, a))
-        todo.extend(sorted(inner, key=lambda d: d.via_frac))
-        if todo:
-            probing[(e, sg)] = todo
+            key = (iu, iv, sg, round(g, 3))
+            if key in pfail:
+                continue                      # touched: evidence of a wall there
+            if key in pclear:
+                n_clear += 1                  # found room (its robot stays): done, not evidence
+                continue
+            n_open += 1
+            depth = probe_depth_rv(g, d0_rv, dtd_rv)
+            # either end can drive it, the nearer one first; an end whose approach leg kept
+            # failing (it clips a jamb) has given up: the other end tries it
+            a = None if _gave_up(key, iu) else Deployment(
+                iu, pu, (iu, iv), sg, sg * math.pi / 2.0, L.clearance(u, pu), "probe",
+                round(g, 3), depth)
+            b = None if _gave_up(key, iv) else Deployment(
+                iv, pv, (iu, iv), sg, -sg * math.pi / 2.0, L.clearance(v, pv), "probe",
+                round(1.0 - g, 3), depth)
+            inner.extend(d for d in ((a, b) if g <= 0.5 else (b, a)) if d is not None)
+        if inner:
+            probing[(e, sg)] = sorted(inner, key=lambda d: d.via_frac)
+        elif n_open == 0 and n_clear == 0:
+            marks[(e, sg)] = "probes"         # every probe touched: closed on evidence
+        elif n_open == 0 and _CLEAR_INFERS:
+            marks[(e, sg)] = "probe_clear"    # inferred: some probe found room
         else:
-            marks[(e, sg)] = "probe_unreachable" if skipped else "probes"
+            # a probe unreached from both ends, or one that found room while the side stays
+            # one-sided: no evidence closes it and nothing is left to try. Frontier with no
+            # deployment: the run ends uncertified (honest), never a closure
+            probing[(e, sg)] = []
 
     for pair in forced_obstacle:
         a, b = (int(x) for x in pair)

@@ -170,21 +170,62 @@ def test_interior_probes_of_one_robot_in_one_direction_do_not_block_each_other()
     assert first.via_frac not in fr and len(fr) == len(at0) - 1
 
 
-def test_unreached_probes_close_a_side_only_as_inferred():
+def test_an_unreached_probe_is_tried_from_the_other_end_and_never_closes_a_side():
+    """issue 21 (bench/truth.py map 26): every approach leg from one end clipped a jamb and
+    the given-up probes closed a 0.77 rv door. An unreached probe is no evidence."""
     P, rep, _ = _door_pair(0.8)
     cx = build_complex(rep)
+    e = int(cx.edge_index(0, 1))
     ev = Evidence()
     f = detect_fence(cx, **ev.fence_kwargs())
+    mid = [d for d in _probes(f) if abs(probe_key(d.vertex, d.edge, d.sigma, d.via_frac)[3] - 0.5) < 1e-9]
+    assert {d.vertex for d in mid} == {0, 1}
     for d in _probes(f):
-        if d.via_frac == 0.5:
-            for _ in range(Evidence.UNREACHED_LIMIT):
-                ev.record_unreached(d)
-        else:
+        if d not in mid:
             ev.record(d, touched=True)
+    from0 = next(d for d in mid if d.vertex == 0)
+    for _ in range(Evidence.UNREACHED_LIMIT):
+        ev.record_unreached(from0)
     f = detect_fence(cx, **ev.fence_kwargs())
+    left = _probes(f)
+    assert [(d.vertex, d.via_frac) for d in left] == [(1, 0.5)]     # the other end now
+    assert e in f.frontier.tolist() and not f.obstacle.size
+    for _ in range(Evidence.UNREACHED_LIMIT):
+        ev.record_unreached(left[0])
+    f = detect_fence(cx, **ev.fence_kwargs())
+    # unreached from both ends: frontier with nothing left to try (the run ends
+    # uncertified), never an obstacle, inferred or not
+    assert not _probes(f) and e in f.frontier.tolist()
+    assert not f.obstacle.size and not f.inferred
+    assert f.by_index[e].sides[0].reason == "probing"
+    # a probe that does reach and touch is evidence again: the side closes on probes
+    ev.record(left[0], touched=True)
+    f = detect_fence(cx, **ev.fence_kwargs())
+    assert e in f.obstacle.tolist() and f.by_index[e].sides[0].why == "probes" and not f.inferred
+
+
+def test_a_clear_probe_is_done_and_never_offered_again():
+    """issue 21 livelock (bench/truth.py map 4): a clear probe whose robot formed no
+    triangle with the edge was offered again and again, stacking robots."""
+    P, rep, hits = _door_pair(0.8)
+    cx = build_complex(rep)        # the clear probe's robot is not added: no triangle
     e = int(cx.edge_index(0, 1))
-    assert e in f.obstacle.tolist()
-    assert f.inferred == ((e, "probe_unreachable"),)
+    ev = Evidence()
+    f = detect_fence(cx, **ev.fence_kwargs())
+    n0 = len({probe_key(d.vertex, d.edge, d.sigma, d.via_frac) for d in _probes(f)})
+    mid = next(d for d in _probes(f) if d.via_frac == 0.5)
+    ev.record(mid, touched=False)
+    assert probe_key(mid.vertex, mid.edge, mid.sigma, mid.via_frac) in ev.clear_probes()
+    f = detect_fence(cx, **ev.fence_kwargs())
+    keys = {probe_key(d.vertex, d.edge, d.sigma, d.via_frac) for d in _probes(f)}
+    assert len(keys) == n0 - 1 and all(k[3] != 0.5 for k in keys)
+    for d in _probes(f):
+        ev.record(d, touched=True)
+    f = detect_fence(cx, **ev.fence_kwargs())
+    # every probe done, one found room, the side still one-sided: not closed on evidence;
+    # frontier with no deployment left
+    assert not _probes(f) and e in f.frontier.tolist() and not f.obstacle.size
+    assert f.by_index[e].sides[0].reason == "probing" and not f.inferred
 
 
 def test_probe_via_bearings_follow_from_the_triangle():

@@ -196,6 +196,30 @@ def test_convex_corner_below_threshold_marks_both_edges_obstacle():
     assert all(d.edge not in ((0, 1), (0, 2)) for d in f.deployments.get(0, ()))
 
 
+def test_convex_corner_sides_can_be_probed_before_they_close(monkeypatch):
+    """The convex-corner rule (spec 3.3 ii) only makes its sides candidates (issue 21,
+    bench/truth.py map 11: a free-standing box broke it): they are probed, and close on
+    evidence once every probe touched."""
+    import coordinator.fence as fence_mod
+    monkeypatch.setattr(fence_mod, "_CORNER_PROBES", True)
+    cx, f = _corner(50)
+    assert int(cx.edge_index(1, 2)) < 0  # occluded
+    es = (int(cx.edge_index(0, 1)), int(cx.edge_index(0, 2)))
+    for e in es:
+        assert f.by_index[e].sides[0].reason == "probing" and e in f.frontier.tolist()
+    assert not f.inferred
+    # no plain edge deployment off them, only probes
+    assert all(d.kind == "probe" for lst in f.deployments.values() for d in lst
+               if d.edge in ((0, 1), (0, 2)))
+    assert any(d.edge in ((0, 1), (0, 2)) for lst in f.deployments.values() for d in lst)
+    f = _probed(cx)
+    assert {(0, 1), (0, 2)} <= _pairs(cx, f.obstacle)
+    for e in es:
+        assert f.by_index[e].sides[0].reason == "probes"
+        assert e not in f.frontier.tolist()
+    assert all(d.edge not in ((0, 1), (0, 2)) for d in f.deployments.get(0, ()))
+
+
 def test_corner_above_threshold_deploys_on_the_bisector():
     cx, f = _corner(70)
     e = int(cx.edge_index(0, 1))
