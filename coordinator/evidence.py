@@ -141,9 +141,9 @@ class Evidence:
         """An interior probe whose approach leg failed (its robot never reached the point on
         the edge: "via (...)"). Returns how often that probe has failed so from this end;
         from UNREACHED_LIMIT on it is given up from this end (``probe_unreachable``). An
-        unreached probe is no evidence: the fence then offers it from the other end only,
-        and a probe given up from both ends leaves its side frontier with no deployment
-        (the run ends uncertified), never closed."""
+        unreached probe is no evidence: the fence then offers it from the other end only;
+        given up from both ends, its side closes only as an inference ('probe_unreachable',
+        reported with the certificate), never as evidence."""
         frac = float(getattr(dep, "via_frac", 0.0) or 0.0)
         if dep.edge is None or frac <= 1e-9:
             return 0

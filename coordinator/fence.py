@@ -646,10 +646,16 @@ def detect_fence(
             marks[(e, sg)] = "probes"         # every probe touched: closed on evidence
         elif n_open == 0 and _CLEAR_INFERS:
             marks[(e, sg)] = "probe_clear"    # inferred: some probe found room
+        elif n_clear == 0:
+            # every probe touched or was unreached from both ends (its approach leg clips a
+            # jamb from either side): closed, but as an INFERENCE, reported with the
+            # certificate ('probe_unreachable'). Leaving such sides open stopped real runs
+            # uncertified at 100% coverage (the 0.8 m door map: "no feasible push")
+            marks[(e, sg)] = "probe_unreachable"
         else:
-            # a probe unreached from both ends, or one that found room while the side stays
-            # one-sided: no evidence closes it and nothing is left to try. Frontier with no
-            # deployment: the run ends uncertified (honest), never a closure
+            # a probe that found room while the side stays one-sided: no evidence closes it
+            # and nothing is left to try. Frontier with no deployment: the run ends
+            # uncertified (honest), never a closure
             probing[(e, sg)] = []
 
     for pair in forced_obstacle:

@@ -170,9 +170,11 @@ def test_interior_probes_of_one_robot_in_one_direction_do_not_block_each_other()
     assert first.via_frac not in fr and len(fr) == len(at0) - 1
 
 
-def test_an_unreached_probe_is_tried_from_the_other_end_and_never_closes_a_side():
+def test_an_unreached_probe_is_tried_from_the_other_end_then_closes_only_as_inferred():
     """issue 21 (bench/truth.py map 26): every approach leg from one end clipped a jamb and
-    the given-up probes closed a 0.77 rv door. An unreached probe is no evidence."""
+    the given-up probes closed a 0.77 rv door. An unreached probe is no evidence: the other
+    end tries it first; unreached from both, the side closes only as an inference, reported
+    with the certificate."""
     P, rep, _ = _door_pair(0.8)
     cx = build_complex(rep)
     e = int(cx.edge_index(0, 1))
@@ -193,11 +195,10 @@ def test_an_unreached_probe_is_tried_from_the_other_end_and_never_closes_a_side(
     for _ in range(Evidence.UNREACHED_LIMIT):
         ev.record_unreached(left[0])
     f = detect_fence(cx, **ev.fence_kwargs())
-    # unreached from both ends: frontier with nothing left to try (the run ends
-    # uncertified), never an obstacle, inferred or not
-    assert not _probes(f) and e in f.frontier.tolist()
-    assert not f.obstacle.size and not f.inferred
-    assert f.by_index[e].sides[0].reason == "probing"
+    # unreached from both ends: nothing left to try; closed only as an inference, reported
+    assert not _probes(f) and e in f.obstacle.tolist()
+    assert f.by_index[e].sides[0].why == "probe_unreachable"
+    assert (e, "probe_unreachable") in [(int(a), w) for a, w in f.inferred]
     # a probe that does reach and touch is evidence again: the side closes on probes
     ev.record(left[0], touched=True)
     f = detect_fence(cx, **ev.fence_kwargs())

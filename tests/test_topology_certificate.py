@@ -534,21 +534,33 @@ def _contact(p, segs):
     return math.atan2(u[1], u[0])
 
 
-def _drives(cx, pos, segs, fence, tdf):
-    """Simulated test drives: each deployment drives d_td = 0.25 rv; one that comes within
-    a body radius of a wall fails. Returns True if a new failure was added."""
-    new = False
+def _drives(cx, pos, segs, fence, ev):
+    """Simulated drives: each deployment drives d_td = 0.25 rv, a probe first to its point on
+    the edge, then depth_rv along its bearing; one that comes within a body radius of a
+    wall fails. Outcomes go to ``ev`` (coordinator.evidence.Evidence). Returns True if a new
+    outcome was recorded."""
+    before = len(ev.records)
+    done = {(r.vertex, round(r.direction, 9), r.via_frac, r.edge) for r in ev.records}
     for v, deps in fence.deployments.items():
         p = pos[cx.index_of(v)]
         for d in deps:
-            q = p + 0.25 * np.array([math.cos(d.bearing), math.sin(d.bearing)])
-            sd = np.linspace(0, 1, 9)[:, None] * (q - p) + p
-            if _seg_dist(sd, segs)[0].min() <= _RB:
-                lst = tdf.setdefault(v, [])
-                if all(abs(math.remainder(d.bearing - x, 2 * math.pi)) > 1e-9 for x in lst):
-                    lst.append(d.bearing)
-                    new = True
-    return new
+            key = (int(v), round(float(d.bearing), 9), float(getattr(d, "via_frac", 0.0) or 0.0),
+                   tuple(d.edge) if d.edge is not None else None)
+            if key in done:
+                continue
+            start, length = p, 0.25
+            if d.kind == "probe":
+                if d.via_frac > 0 and d.edge is not None:
+                    q = pos[cx.index_of(d.edge[1] if d.edge[0] == v else d.edge[0])]
+                    start = p + d.via_frac * (q - p)
+                length = d.depth_rv
+            end = start + length * np.array([math.cos(d.bearing), math.sin(d.bearing)])
+            sd = np.linspace(0, 1, 13)[:, None] * (end - start) + start
+            touched = bool(_seg_dist(sd, segs)[0].min() <= _RB)
+            if touched or d.kind == "probe":   # a clear probe is done (no robot placed here)
+                ev.record(d, touched)
+                done.add(key)
+    return len(ev.records) > before
 
 
 class _Grid:
@@ -630,10 +642,11 @@ def campaign_case(seed, drop_fence_edge=False):
     P, reps, polys, W, H, segs = campaign_sample(seed)
     cx = build_complex(reps)
     pos = P[cx.index(cx.ids)]
-    tdf: dict = {}
-    for _ in range(6):
-        fence = detect_fence(cx, test_drive_failures=tdf)
-        if not _drives(cx, pos, segs, fence, tdf):
+    from coordinator.evidence import Evidence
+    ev = Evidence(door_min_rv=0.4, robot_radius_rv=0.06)
+    for _ in range(12):
+        fence = detect_fence(cx, **ev.fence_kwargs())
+        if not _drives(cx, pos, segs, fence, ev):
             break
     cert = certify(cx, fence)
     out = {"seed": seed, "n": cx.n, "triangles": cx.n_triangles, "certified": bool(cert.certified),
