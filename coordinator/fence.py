@@ -72,8 +72,9 @@ _CORNER_PROBES = False
 # 0-39: 14 fixed (all certified), 26 stuck (22 of them >= 99.9 % covered: unreached probes
 # from both ends, or a clear probe), 0 livelock, 0 cap, 46.2 robots; True, maps 0-36: 21
 # certified, 16 stuck, no false certificate beyond False's (#11 convex corner, #18 a 0.30
-# rv door). Off until a bigger sample shows 'probe_clear' costs no false certificate.
-_CLEAR_INFERS = False
+# rv door). On: with it off, corridor_doors (seed 0, in-process) stopped uncertified after 114
+# cycles with one such side left ("no feasible push"). The closure is reported as inferred.
+_CLEAR_INFERS = True
 
 
 @dataclass(frozen=True)
