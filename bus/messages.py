@@ -465,6 +465,9 @@ class Complex(Message):
     inferred / inferred_why: obstacle edges (indices into the edge list) closed by
       inference rather than by probes, and how ("convex_corner", "forced"); empty by
       default.
+    exceptions: one-sided edges the fence excuses (spec 3.2: the open side lies inside
+      the covered lens), indices into the edge list; with frontier and obstacle they are
+      every one-sided edge, which run's re-check tests against the world's geometry.
     """
     cycle: int = f_int(0)
     t: float = f_float(0.0)
@@ -484,6 +487,7 @@ class Complex(Message):
     reason: str = f_str(maxlen=200, optional=True)
     inferred: list = f_ints(0, optional=True)
     inferred_why: list = f_strs(maxlen=40, optional=True)
+    exceptions: list = f_ints(0, optional=True)
 
     def _post_check(self):
         if len(self.vertices) != len(self.occupants):
@@ -493,7 +497,7 @@ class Complex(Message):
         if len(self.triangles) % 3:
             raise WireError(self.TAG, "triangles", "length not a multiple of 3")
         m = len(self.edges) // 2
-        for name in ("frontier", "obstacle", "inferred"):
+        for name in ("frontier", "obstacle", "inferred", "exceptions"):
             bad = [e for e in getattr(self, name) if e >= m]
             if bad:
                 raise WireError(self.TAG, name, f"edge index {bad[0]} >= {m} edges")

@@ -505,7 +505,8 @@ class Deployer:
             robots=sum(1 for r in self.robots.values() if r.alive and not r.dead), state=state,
             failures_healed=self.failures_healed, reason=self.stop_reason[:200],
             inferred=[int(e) for e, _ in getattr(plan, "inferred", ())],
-            inferred_why=[str(w) for _, w in getattr(plan, "inferred", ())])
+            inferred_why=[str(w) for _, w in getattr(plan, "inferred", ())],
+            exceptions=[int(e) for e in getattr(plan, "exceptions", ())])
 
     # ------------------------------------------------------------------ jobs
     def _make_job(self, spec: JobSpec) -> PushJob:

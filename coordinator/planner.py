@@ -83,6 +83,7 @@ class CyclePlan:
     certified: bool
     hole_edges: list[tuple[int, int]] = field(default_factory=list)
     inferred: list[tuple[int, str]] = field(default_factory=list)  # (index into edges, why)
+    exceptions: list[int] = field(default_factory=list)  # one-sided edges excused (spec 3.2)
     redundant: set[int] = field(default_factory=set)
     jobs: list[JobSpec] = field(default_factory=list)
     open_vertices: set[int] = field(default_factory=set)  # vertices with a deployment left
@@ -150,7 +151,8 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
                      obstacle=[int(e) for e in fence.obstacle],
                      certified=bool(cert.certified) and fence.z.size > 0,
                      hole_edges=[tuple(int(x) for x in e) for e in cert.hole_edge_nodes],
-                     inferred=[(int(e), str(w)) for e, w in fence.inferred])
+                     inferred=[(int(e), str(w)) for e, w in fence.inferred],
+                     exceptions=[int(e) for e in fence.exceptions])
     if redundancy and plan.certified:
         prot = set(protected) | set(snap.sources)
         red = find_redundant(cx, fence, cert, protected=prot)

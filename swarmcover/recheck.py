@@ -9,9 +9,8 @@ from the message and checks the claim again:
    target never certifies);
 2. the frontier K is empty;
 3. over GF(2), the obstacle edges O are the boundary of a 2-chain of the message's
-   triangles, solved again by ``coordinator.certify`` on the rebuilt complex (an O with odd
-   vertices, where edges cross, is first closed by short joins, at most MAX_JOIN edges
-   each and MAX_ADDED x |O| in all, then by the certificate's slack search);
+   triangles up to a closure inside O's one-hop closure zone, the coordinator's own
+   criterion (``coordinator.certificate``), solved again on the rebuilt complex;
 4. with ground truth (``positions``, the world's): every occupant is a robot of the world,
    and every edge joins robots at most rv apart (with ``tol`` for motion since the cycle).
 
@@ -83,6 +82,14 @@ def recheck(cx, positions: dict | None = None, rv: float | None = None,
             if d > rv * (1 + tol):
                 return Recheck(False, f"edge {verts[a]}-{verts[b]} is {d:.2f} m long in the "
                                       f"world (rv {rv:g} m)")
+        missing = _open_sides_left(el, tl, [positions[o] for o in occ],
+                                   set(cx.obstacle) | set(getattr(cx, "exceptions", ()) or ()),
+                                   SIDE_MARGIN * rv)
+        if missing:
+            a, b = el[missing[0]].tolist()
+            return Recheck(False, f"{len(missing)} edges with triangles on one side only in the "
+                                  f"world are neither obstacle nor exception, e.g. "
+                                  f"{verts[a]}-{verts[b]}")
     # GF(2): O must be a boundary of the message's triangles
     from types import SimpleNamespace
 
@@ -102,57 +109,53 @@ def recheck(cx, positions: dict | None = None, rv: float | None = None,
     new_index = np.empty(len(eo), np.int64)
     new_index[eo] = np.arange(len(eo))
     z = np.zeros(len(eo), bool)
+    has_tri = np.zeros(len(eo), bool)
+    has_tri[_edges_of_triangles(e2[eo], t2[to])] = True
     for k in cx.obstacle:
-        z[new_index[k]] ^= True
+        # an obstacle edge with no triangle (a single-file chain walled on both sides) is
+        # in no boundary: the certificate's target is the one-sided edges
+        if has_tri[new_index[k]]:
+            z[new_index[k]] ^= True
     if not z.any():
         return Recheck(False, "no obstacle edge: nothing fences the region")
-    cert = certify(topo, z)
-    if not cert.certified:
-        deg = np.bincount(topo.edges[z].ravel(), minlength=n) & 1
-        if deg.any():
-            # O has odd vertices (crossing edges): the certificate closed it by search
-            fence = SimpleNamespace(z=z, z_raw=np.nonzero(z)[0], z_repair=np.array([1]))
-            cert = _closed(topo, fence, z, deg)
+    # the coordinator's own criterion: O is the target z_raw, closed (where fence edges
+    # cross) only by edges of its one-hop closure zone
+    cert = certify(topo, SimpleNamespace(z_raw=np.nonzero(z)[0]))
     if cert is None or not cert.certified:
         return Recheck(False, "the obstacle edges are not the boundary of any 2-chain of the "
                               "complex's triangles")
     return Recheck(True)
 
 
-MAX_JOIN = 4        # edges joining two odd vertices of O, where fence edges cross
-MAX_ADDED = 0.25    # x |O|: the most edges a closure may add (pillar_hall's end state: 15 of 87)
+SIDE_MARGIN = 0.05   # x rv: an apex nearer an edge's line than this is on neither side
 
 
-def _closed(topo, fence, z, deg):
-    """certify on O closed into a cycle: each odd vertex joined to the nearest other one by
-    a shortest path of at most MAX_JOIN edges (a T-join, as the fence closes crossings), then
-    the certificate's slack search around them. None if no such closure exists."""
-    from scipy.sparse import csr_matrix
-    from scipy.sparse.csgraph import shortest_path
+def _edges_of_triangles(edges: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Indices (into sorted ``edges``) of every edge of a triangle."""
+    if not len(tris):
+        return np.zeros(0, np.int64)
+    key = {(int(a), int(b)): i for i, (a, b) in enumerate(edges.tolist())}
+    return np.array(sorted({key[(t[i], t[j])] for t in tris.tolist()
+                            for i, j in ((0, 1), (0, 2), (1, 2))}), np.int64)
 
-    from coordinator.certificate import certify
-    n = topo.n
-    u, v = topo.edges[:, 0], topo.edges[:, 1]
-    g = csr_matrix((np.ones(len(u)), (u, v)), shape=(n, n))
-    odd = [int(x) for x in np.nonzero(deg)[0]]
-    zz = z.copy()
-    eid = {(int(a), int(b)): i for i, (a, b) in enumerate(zip(u, v))}
-    while len(odd) >= 2:
-        a = odd.pop(0)
-        dist, pred = shortest_path(g, directed=False, unweighted=True, indices=[a],
-                                   return_predecessors=True)
-        b = min(odd, key=lambda x: dist[0, x])
-        if not dist[0, b] <= MAX_JOIN:
-            return None
-        odd.remove(b)
-        x = b
-        while x != a:
-            p = int(pred[0, x])
-            zz[eid[(min(p, x), max(p, x))]] ^= True
-            x = p
-    added = int((zz & ~z).sum())
-    if not zz.any() or added > MAX_ADDED * int(z.sum()):
-        return None
-    fence.z = zz
-    fence.z_repair = np.nonzero(zz & ~z)[0] if (zz & ~z).any() else np.array([0])
-    return certify(topo, fence)
+
+def _open_sides_left(el, tl, pts, fenced: set, margin: float) -> list[int]:
+    """Edges (indices into ``el``) that in the world have triangles clearly on one side
+    only (every apex more than ``margin`` off the edge's line, all on one side) and are
+    in ``fenced`` (obstacle or exception) neither: sides nobody closed."""
+    P = np.asarray(pts, float).reshape(-1, 2)
+    side: dict[tuple[int, int], set] = {}
+    for t in tl.tolist():
+        for i in range(3):
+            u, v, w = t[i], t[(i + 1) % 3], t[(i + 2) % 3]
+            a, b = min(u, v), max(u, v)
+            d = P[b] - P[a]
+            ln = math.hypot(*d)
+            c = (d[0] * (P[w] - P[a])[1] - d[1] * (P[w] - P[a])[0]) / ln if ln > 0 else 0.0
+            side.setdefault((a, b), set()).add(0 if abs(c) <= margin else (1 if c > 0 else -1))
+    out = []
+    for k, (a, b) in enumerate(el.tolist()):
+        s = side.get((min(a, b), max(a, b)))
+        if s and len(s) == 1 and 0 not in s and k not in fenced:
+            out.append(k)
+    return out

@@ -74,6 +74,7 @@ def messages(draw, cls):
         vals["frontier"] = [e % m for e in vals["frontier"]] if m else []
         vals["obstacle"] = [e % m for e in vals["obstacle"]] if m else []
         vals["inferred"] = [e % m for e in vals["inferred"]] if m else []
+        vals["exceptions"] = [e % m for e in vals["exceptions"]] if m else []
         vals["inferred_why"] = vals["inferred_why"][: len(vals["inferred"])]
     return cls(**vals)
 

@@ -136,7 +136,9 @@ def test_recheck_accepts_a_true_certificate_and_refuses_forged_ones():
 
     assert not recheck(forged(triangles=[]), pos, 1.0).ok                 # nothing certified
     assert not recheck(forged(frontier=[2]), pos, 1.0).ok                 # K not empty
-    assert not recheck(forged(obstacle=[0, 1]), pos, 1.0).ok              # O not a boundary
+    assert not recheck(forged(obstacle=[0, 1]), pos, 1.0).ok              # sides 1-3, 2-3 open
+    assert "neither obstacle nor exception" in recheck(forged(obstacle=[0, 1]), pos, 1.0).why
+    assert recheck(forged(obstacle=[0, 1], exceptions=[3, 4]), pos, 1.0).ok   # excused
     assert not recheck(forged(obstacle=[0]), pos, 1.0).ok
     assert not recheck(forged(obstacle=[]), pos, 1.0).ok
     assert not recheck(forged(triangles=[0, 1, 3]), pos, 1.0).ok          # 0-3 is no edge
@@ -177,7 +179,8 @@ def test_twin_tracking_is_lifted_from_the_bridge_report():
 def test_inferred_obstacle_edges_are_listed_when_the_complex_has_them():
     from swarmcover.run import _inferred_edges
     cx = _certified_square()
-    assert _inferred_edges(cx, {}) is None   # a Complex without the fields (older coordinator)
+    assert _inferred_edges(None, {}) is None   # no Complex received
+    assert _inferred_edges(cx, {}) == []       # a Complex with none inferred
     cx.inferred = [3]
     cx.inferred_why = ["both ends' test drives touched"]
     out = _inferred_edges(cx, {11: (0.8, 0.0), 13: (0.8, 0.8)})
@@ -185,8 +188,10 @@ def test_inferred_obstacle_edges_are_listed_when_the_complex_has_them():
 
 
 def test_recheck_accepts_the_pillar_hall_end_state_whose_fence_crosses_itself():
-    """tests/data/pillar_hall_end.json: O has 24 odd vertices where edges cross pillars; the
-    coordinator certified it through its slack closure, and so must run's re-check."""
+    """tests/data/pillar_hall_end.json: the one-sided edges z_raw have odd vertices where
+    edges cross pillars; the certificate closes them inside their one-hop zone, and run's
+    re-check, on the same criterion, must accept the end state whose O is z_raw (every
+    side closed) and refuse it when a stretch of the fence is missing."""
     from pathlib import Path
 
     from coordinator import build_complex, certify, detect_fence
@@ -203,13 +208,25 @@ def test_recheck_accepts_the_pillar_hall_end_state_whose_fence_crosses_itself():
     ids = cx.ids.tolist()
     msg = Complex(vertices=ids, occupants=ids, edges=[ids[x] for e in cx.edges for x in e],
                   triangles=[ids[x] for t in cx.triangles for x in t], frontier=[],
-                  obstacle=[int(x) for x in fence.obstacle], certified=True, state="certified")
+                  obstacle=[int(x) for x in fence.z_raw], exceptions=[int(x) for x in fence.exceptions],
+                  certified=True, state="certified")
     pos = {int(k): tuple(v[:2]) for k, v in d["positions"].items()}
     assert recheck(msg, pos, 1.0).ok
-    # every other obstacle edge is not a boundary, nor closable by short joins (one edge
-    # fewer is: the closure re-adds it, as the coordinator's fence repair would)
-    assert not recheck(Complex(**{**{k: v for k, v in msg.to_dict().items() if k[0] != "_"},
-                                  "obstacle": msg.obstacle[::2]}), pos, 1.0).ok
+    # the fence edges within 2.5 m of one fence edge's midpoint dropped (18 of 90): the
+    # zone (one hop around the gap's ends) cannot close it
+    E = np.asarray(msg.edges).reshape(-1, 2)
+
+    def mid(k):
+        return (np.array(pos[E[k, 0]]) + np.array(pos[E[k, 1]])) / 2
+
+    c = mid(msg.obstacle[0])
+    keep = [k for k in msg.obstacle if np.linalg.norm(mid(k) - c) > 2.5]
+    assert len(msg.obstacle) - len(keep) >= 15
+    gap = Complex(**{**{k: v for k, v in msg.to_dict().items() if k[0] != "_"}, "obstacle": keep})
+    assert not recheck(gap).ok                                    # GF(2) alone refuses it
+    assert "neither obstacle nor exception" in recheck(gap, pos, 1.0).why   # and the world
+    none = Complex(**{**{k: v for k, v in msg.to_dict().items() if k[0] != "_"}, "obstacle": []})
+    assert "no obstacle edge" in recheck(none).why
 
 
 def test_only_the_coordinators_session_with_the_run_key_is_believed():

@@ -242,7 +242,7 @@ def test_removed_redundant_robots_and_inferred_edges_have_their_own_marks():
                      edges=[0, 1, 0, 2, 1, 2], triangles=[0, 1, 2], obstacle=[0, 1])
     # Complex.inferred is optional on the wire: a Complex without it draws as before
     assert len(build_scene(truth, base).inferred) == 0
-    cx = SimpleNamespace(**{f: getattr(base, f) for f, _ in base._FIELDS}, inferred=[1])
+    cx = SimpleNamespace(**{**{f: getattr(base, f) for f, _ in base._FIELDS}, "inferred": [1]})
     scene = build_scene(truth, cx, removed={7})
     assert scene.removed.tolist() == [False, False, False, True]
     assert scene.inferred.shape == (1, 2, 2)
