@@ -59,22 +59,22 @@ _DEEP = 2.0 * math.pi / 3.0
 # Single-file ends offer every direction of their open wedge 60 deg apart that keeps this
 # far from every neighbour (a little under 60 deg, for bearing noise).
 _SINGLE_CLEAR = math.radians(50.0)
-# Convex-corner marks (spec 3.3 ii) make a side a probing candidate rather than closing it
-# (True), or close it as inferred 'convex_corner' (False). Off: bench/truth.py seed 0 maps
+# TopologyParams.corner_probes: convex-corner marks (spec 3.3 ii) make a side a probing
+# candidate rather than closing it (True), or close it as inferred 'convex_corner' (False).
+# Off by default: bench/truth.py seed 0 maps
 # 0-12 with it on (and _CLEAR_INFERS on) ran clutter maps 10, 11, 12 to the robot cap (99,
 # 81, 80 robots; clear probes off box corners place robots that form new corners), so
 # tests/test_truth.py cannot pass either way; map 11 (a free-standing box) is then still a
 # false certificate by this rule (issue 21 item 3 open).
-_CORNER_PROBES = False
-# A side whose probes are all done, some clear (room found, its robot stayed) while the side
+# TopologyParams.clear_infers: a side whose probes are all done, some clear (room found, its robot stayed) while the side
 # is still one-sided: False leaves it frontier with no deployment (uncertified); True closes
 # it as inferred ('probe_clear'). bench/truth.py seed 0 (corner probes off): False, maps
 # 0-39: 14 fixed (all certified), 26 stuck (22 of them >= 99.9 % covered: unreached probes
 # from both ends, or a clear probe), 0 livelock, 0 cap, 46.2 robots; True, maps 0-36: 21
 # certified, 16 stuck, no false certificate beyond False's (#11 convex corner, #18 a 0.30
-# rv door). On: with it off, corridor_doors (seed 0, in-process) stopped uncertified after 114
-# cycles with one such side left ("no feasible push"). The closure is reported as inferred.
-_CLEAR_INFERS = True
+# rv door). On by default: with it off, corridor_doors (seed 0, in-process) stopped
+# uncertified after 114 cycles with one such side left ("no feasible push"). The closure is
+# reported as inferred.
 
 
 @dataclass(frozen=True)
@@ -410,7 +410,7 @@ def detect_fence(
       failing) is offered from the other end only. Neither is evidence of a wall: a side
       whose probes are all touched, clear or unreached from both ends, with one not
       touched, stays frontier ('probing') with no deployment, and the run ends uncertified
-      (``_CLEAR_INFERS`` instead closes it as inferred 'probe_clear' when some probe was
+      (``TopologyParams.clear_infers`` instead closes it as inferred 'probe_clear' when some probe was
       clear and none is left).
     Inferred closures (no probe): the convex-corner / occlusion rule (pi/3 - 2 beta, reason
     'convex_corner') and ``forced_obstacle`` ('forced'); ``Fence.inferred`` lists them.
@@ -596,7 +596,7 @@ def detect_fence(
 
     d0_rv, dtd_rv = P.d0 / P.rv, P.d_td / P.rv
 
-    if _CORNER_PROBES:
+    if P.corner_probes:
         # the convex-corner rule (spec 3.3 ii) assumes an obstacle corner sticking out of a
         # wall; a free-standing box breaks it (clutter map 11 of bench/truth.py certified at
         # 21.8 % coverage): its marks only make a side a candidate, probed like the others
@@ -645,7 +645,7 @@ def detect_fence(
             probing[(e, sg)] = sorted(inner, key=lambda d: d.via_frac)
         elif n_open == 0 and n_clear == 0:
             marks[(e, sg)] = "probes"         # every probe touched: closed on evidence
-        elif n_open == 0 and _CLEAR_INFERS:
+        elif n_open == 0 and P.clear_infers:
             marks[(e, sg)] = "probe_clear"    # inferred: some probe found room
         elif n_clear == 0:
             # every probe touched or was unreached from both ends (its approach leg clips a

@@ -20,6 +20,13 @@ class TopologyParams:
     contact sensors N_T (tau = pi/N_T). w_obstacle: path cost of an obstacle edge (> 1).
     d_td: test-drive distance, defaults to 0.25*rv. gamma: concave-corner angle
     threshold (rad). redundancy_period: T_H, deployment cycles between redundancy passes.
+
+    Evidence rules (issue 21; measured in coordinator/fence.py's notes):
+    corner_probes: convex-corner marks (spec 3.3 ii) only make a side a probing candidate
+      (True) instead of closing it as the reported inference 'convex_corner' (False).
+    clear_infers: a side whose probes are all done, some clear, while it stays one-sided,
+      closes as the reported inference 'probe_clear' (True) or stays frontier with no
+      deployment left (False: the run cannot certify).
     """
 
     rv: float = 1.0
@@ -30,6 +37,8 @@ class TopologyParams:
     d_td: float | None = None
     gamma: float = 3.0 * math.pi / 4.0
     redundancy_period: int = 10
+    corner_probes: bool = False
+    clear_infers: bool = True
 
     def __post_init__(self) -> None:
         if self.eps is None:

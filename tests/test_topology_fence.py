@@ -15,7 +15,7 @@ DEG = math.pi / 180
 
 
 def _fence(P, **kw):
-    fence_kw = {k: kw.pop(k) for k in list(kw) if k in ("test_drive_failures", "default_bearing", "forced_obstacle")}
+    fence_kw = {k: kw.pop(k) for k in list(kw) if k in ("test_drive_failures", "default_bearing", "forced_obstacle", "params")}
     cx = build_complex(reports(P, **kw))
     return cx, detect_fence(cx, **fence_kw)
 
@@ -176,14 +176,15 @@ def test_touch_towards_a_visible_robot_is_not_an_obstacle_contact():
     assert _pairs(cx, f.obstacle) == {(0, 1)}
 
 
-def _corner(angle_deg):
+def _corner(angle_deg, **params):
     a = angle_deg * DEG
     i, j = np.array([0.0, 0.0]), np.array([0.8, 0.0])
     k = 0.8 * np.array([math.cos(a), math.sin(a)])
     b = a + 50 * DEG
     P = np.array([i, j, k, [0.4, -0.5], 0.64 * np.array([math.cos(b), math.sin(b)])])
     mid = (j + k) / 2
-    return _fence(P, discs=[(mid[0], mid[1], 0.05)])  # an obstacle corner hides j from k
+    # an obstacle corner hides j from k
+    return _fence(P, discs=[(mid[0], mid[1], 0.05)], params=TopologyParams(**params))
 
 
 def test_convex_corner_below_threshold_marks_both_edges_obstacle():
@@ -196,13 +197,11 @@ def test_convex_corner_below_threshold_marks_both_edges_obstacle():
     assert all(d.edge not in ((0, 1), (0, 2)) for d in f.deployments.get(0, ()))
 
 
-def test_convex_corner_sides_can_be_probed_before_they_close(monkeypatch):
+def test_convex_corner_sides_can_be_probed_before_they_close():
     """The convex-corner rule (spec 3.3 ii) only makes its sides candidates (issue 21,
     bench/truth.py map 11: a free-standing box broke it): they are probed, and close on
     evidence once every probe touched."""
-    import coordinator.fence as fence_mod
-    monkeypatch.setattr(fence_mod, "_CORNER_PROBES", True)
-    cx, f = _corner(50)
+    cx, f = _corner(50, corner_probes=True)
     assert int(cx.edge_index(1, 2)) < 0  # occluded
     es = (int(cx.edge_index(0, 1)), int(cx.edge_index(0, 2)))
     for e in es:
@@ -212,7 +211,7 @@ def test_convex_corner_sides_can_be_probed_before_they_close(monkeypatch):
     assert all(d.kind == "probe" for lst in f.deployments.values() for d in lst
                if d.edge in ((0, 1), (0, 2)))
     assert any(d.edge in ((0, 1), (0, 2)) for lst in f.deployments.values() for d in lst)
-    f = _probed(cx)
+    f = _probed(cx, TopologyParams(corner_probes=True))
     assert {(0, 1), (0, 2)} <= _pairs(cx, f.obstacle)
     for e in es:
         assert f.by_index[e].sides[0].reason == "probes"
