@@ -37,7 +37,7 @@ sys.path.insert(0, str(ROOT))
 
 from bench.common import cpu_seconds, eprint, free_port, wait_line  # noqa: E402
 from hwbridge.fake_robot import DiffDriveSim, DriveParams  # noqa: E402
-from hwbridge.frames import wrap  # noqa: E402
+from ground.angles import wrap  # noqa: E402
 from hwbridge.metrics import TrackLog  # noqa: E402
 from hwbridge.twin import TwinGains, VelocityEstimator, integrate, twin_command  # noqa: E402
 

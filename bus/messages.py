@@ -131,14 +131,6 @@ def f_ints(lo: int = -(2**62), hi: int = 2**62, optional: bool = False):
                                                  "hi": hi, "optional": optional})
 
 
-def optional(f):
-    """Mark a field added after version 1 of its message: a sender that predates it may
-    leave it out, and it decodes to its default (the wire contract stays backward
-    compatible). The same as the field maker's ``optional=True``."""
-    f.metadata = {**f.metadata, "optional": True}
-    return f
-
-
 def f_bools(optional: bool = False):
     def check(v):
         out = _list(v)
@@ -335,7 +327,7 @@ class Sense(Message):
     # lockstep with the coordinator in the barrier: the id of the last task the coordinator
     # sent this robot before this tick (0: none yet); the agent applies its tasks up to that
     # one before it steps. -1: no barrier, tasks apply as they arrive.
-    task_id: int = optional(f_int(-1, default=-1))
+    task_id: int = f_int(-1, default=-1, optional=True)
 
 
 @message("CmdVel")
@@ -353,7 +345,7 @@ class CmdVel(Message):
     # seq of the last Status the agent published before this command (-1: unknown); the
     # lockstep world announces it in the next Clock, so the coordinator knows which
     # statuses belong to the tick
-    status_seq: int = optional(f_int(-1, default=-1))
+    status_seq: int = f_int(-1, default=-1, optional=True)
 
 
 @message("Pose")
@@ -395,7 +387,7 @@ class Status(Message):
     contact: bool = f_bool()
     contact_bearing: float = f_float(**ANGLE)
     pose: list = f_floats(-1e6, 1e6)
-    tick: int = optional(f_int(-1, default=-1))   # the Sense tick it answers; -1: none
+    tick: int = f_int(-1, default=-1, optional=True)   # the Sense tick it answers; -1: none
 
     def _post_check(self):
         if len(self.pose) not in (0, 3):
@@ -515,8 +507,8 @@ class Clock(Message):
     t: float = f_float(0.0)
     mode: str = f_str(("realtime", "lockstep"), default="realtime")
     rtf: float = f_float(0.0, 1e6)
-    agents: list = optional(f_ints(0))
-    status_seqs: list = optional(f_ints(-1))
+    agents: list = f_ints(0, optional=True)
+    status_seqs: list = f_ints(-1, optional=True)
 
 
 @message("CoordAck", same_len=(("task_robots", "task_ids"),

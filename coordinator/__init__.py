@@ -7,7 +7,7 @@ Each module's ``__all__`` is the one list of what it exports; this package re-ex
 (of ``angles`` only ``wrap`` and ``circular_mean``).
 """
 from . import certificate, complex, fence, gvg, params, paths, redundancy, shape, targets
-from .angles import circular_mean, wrap
+from ground.angles import circular_mean, wrap
 from .certificate import *  # noqa: F403
 from .complex import *  # noqa: F403
 from .fence import *  # noqa: F403

@@ -28,7 +28,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from .angles import circular_mean, wrap, wrap_array
+from ground.angles import circular_mean, wrap, wrap_array
 from .complex import Complex
 from .evidence import probe_depth_rv, probe_fractions
 from .params import TopologyParams

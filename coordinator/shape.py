@@ -27,7 +27,7 @@ import numpy as np
 from scipy.sparse import coo_matrix, identity
 from scipy.sparse.linalg import spsolve
 
-from .angles import wrap
+from ground.angles import wrap
 
 __all__ = ["align_headings", "estimate_shape", "Lattice", "lattice_target"]
 

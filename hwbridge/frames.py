@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ground.angles import wrap  # noqa: F401  (re-exported to the bridge's modules)
+from ground.angles import wrap
 
 UP_AXES = ("z", "y")
 

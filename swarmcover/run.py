@@ -126,15 +126,6 @@ class Launcher:
             c.close()
 
 
-def _port_free(port: int) -> bool:
-    with socket.socket() as s:
-        try:
-            s.bind(("127.0.0.1", port))
-            return True
-        except OSError:
-            return False
-
-
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -459,7 +450,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     # every flag and every section is checked before any process starts: exit 2, one line
     try:
-        from swarmcover.validate import check_run, prepare_out
+        from swarmcover.validate import check_run, port_free, prepare_out
         checked = check_run(args)
         cfg, resolved, wmap = checked.cfg, checked.resolved, checked.wmap
         live_limits, swarm = checked.live_limits, checked.swarm
@@ -485,7 +476,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.router:
         endpoint = args.router
     else:
-        port = args.port if args.port is not None else (7447 if _port_free(7447) else _free_port())
+        port = args.port if args.port is not None else (7447 if port_free(7447) else _free_port())
         endpoint = f"tcp/127.0.0.1:{port}"
     zargs = ["--connect", endpoint, "--swarm", swarm]
     launcher = Launcher(logdir, zargs)
