@@ -58,7 +58,7 @@ def test_first_cycle_spawns_then_holds_then_deploys_the_lone_robot():
     # rooms behind 0.9 m doors: a test drive that touches a door jamb closes that robot's
     # deployments, not the fence side, so the robot across the edge still goes through the
     # door (one end's touch used to close whole rooms: certified at 23-87% coverage here)
-    "configs/corridor_doors.toml",
+    pytest.param("configs/corridor_doors.toml", marks=pytest.mark.slow),
 ])
 def test_certified_means_covered(config):
     cfg = load_config(config)
@@ -194,6 +194,7 @@ def _room6x4(tmp_path) -> Path:
     return path
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(240)
 def test_the_final_redundancy_pass_sends_its_robots_away(tmp_path):
     path = _room6x4(tmp_path)  # enough robots for redundancy to find some
@@ -214,6 +215,7 @@ def test_the_final_redundancy_pass_sends_its_robots_away(tmp_path):
     "since the lockstep tick order (tasks apply one tick after the deciding tick) and the "
     "probe rule, seed 4 gave p90 drift 0.058 m without settling and 0.208 m with it, and the "
     "run without settling did not certify within its limits: settling is being re-measured"))
+@pytest.mark.slow
 @pytest.mark.timeout(240)
 def test_movers_on_one_landmark_settle_so_vertices_stay_put(tmp_path):
     """A mover whose other landmarks were moving (the source refilled behind it) homes on one
@@ -253,6 +255,7 @@ def test_movers_on_one_landmark_settle_so_vertices_stay_put(tmp_path):
     assert p90[True] < p90[False] / 2, p90
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(240)
 def test_lattice_placement_covers_the_room(tmp_path, monkeypatch):
     """[coordinator] lattice = true: new robots go to free points of one lattice through the
@@ -371,6 +374,7 @@ def test_the_contact_a_failed_test_drive_reports_is_never_taken_for_a_wall_at_th
     assert dep.contact[v] == pytest.approx(-math.pi / 2)
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(240)
 def test_one_touch_at_the_front_no_longer_cancels_the_other_pushes_from_the_source():
     cancelled = []
@@ -391,6 +395,7 @@ def test_one_touch_at_the_front_no_longer_cancels_the_other_pushes_from_the_sour
     assert res.cycles < 45
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(240)
 def test_a_push_whose_test_drive_touched_is_replanned_within_its_cycle():
     """Spec 3.4(iv): on a touch, the next-best frontier at once. Before, the push was

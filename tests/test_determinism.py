@@ -134,6 +134,7 @@ def test_tiny_twice_distributed_with_a_forged_clock_and_in_process_agree(procs, 
     assert _same(sa, si), (sa, si)
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(900)
 def test_small_twice_distributed_agree(procs, tmp_path):
     a, b = tmp_path / "a", tmp_path / "b"

@@ -5,7 +5,8 @@ live robots' twins track them within a stated bound.
 Bound (see bench/hwbridge.py for the measured numbers): with feed-forward on, as in
 configs/mixed.toml, twin position error mean < 5 cm and p95 < 15 cm per live robot.
 
-The run is real time: 1.5-3.5 minutes of wall time on a loaded 2-core machine.
+The run is real time: 784 s measured (cycle 32; 100% coverage at cycle 9, the rest is
+probing the walls), so it is in the slow tier (pytest -m slow).
 """
 from __future__ import annotations
 
@@ -20,14 +21,14 @@ from procs import free_port
 ROOT = Path(__file__).resolve().parent.parent
 
 
-pytestmark = pytest.mark.timeout(420)
+pytestmark = [pytest.mark.timeout(1000), pytest.mark.slow]
 
 
 def test_mixed_run_covers_with_live_stand_ins(procs, tmp_path):
     out = tmp_path / "run"
     run = procs.swarmcover("run", ROOT / "configs" / "mixed.toml", "--out", out,
-                           "--port", free_port(), "--quiet", "--wall-timeout", "300")
-    rc = run.wait(360)
+                           "--port", free_port(), "--quiet", "--wall-timeout", "900")
+    rc = run.wait(960)
     logs = out / "logs"
     summary = json.loads((out / "summary.json").read_text())
     assert rc == 0 and summary["certified"], run.output()[-3000:]

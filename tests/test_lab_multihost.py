@@ -97,7 +97,8 @@ def _in(ns: str, *argv: str) -> list[str]:
 _VERDICT: dict = {}    # the plain run's outcome: a non-certifying coordinator is not re-waited
 
 
-@pytest.mark.parametrize("secure", [False, True], ids=["plain", "secure"])
+@pytest.mark.parametrize("secure", [False, pytest.param(True, marks=pytest.mark.slow)],
+                         ids=["plain", "secure"])
 def test_router_world_and_agents_on_three_hosts(procs, lab, tmp_path, secure):
     from bus.keys import Keys
     from bus.messages import Spawn

@@ -339,6 +339,7 @@ def test_an_agent_cannot_publish_another_robots_command(secure_router, profile, 
 RUN_BOUND_S = 120.0
 
 
+@pytest.mark.slow
 def test_a_full_small_run_under_the_profile(procs, tmp_path):
     """Guarded: skips (after checking the secured data path worked) if the coverage run does
     not certify within RUN_BOUND_S, as the coordinator is still being tuned."""

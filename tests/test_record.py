@@ -381,6 +381,7 @@ print('EXIT', rec.messages, flush=True)
     assert [r.data for r in read_messages(out)] == [m.Demo(seq=i).encode() for i in range(5)]
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_recorded_tiny_run_opens_in_the_tools_with_the_final_robots_in_the_scene(procs,
                                                                                   tmp_path):

@@ -63,6 +63,7 @@ def test_ctrl_c_stops_every_process(procs, tmp_path):
     no_leftovers(out)
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_killed_agents_and_coordinator_are_healed(procs, tmp_path):
     """10% of the agents die mid-run (here: one of ~10), then the coordinator is killed;
