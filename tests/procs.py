@@ -99,6 +99,16 @@ class Proc:
             break
 
 
+def toml_tables(name: str, *rows: dict) -> str:
+    """TOML text of an array of tables ``[[name]]``, one per row (values as TOML literals:
+    str quoted, lists and numbers as written), for configs written inline in tests."""
+    def lit(v):
+        return f'"{v}"' if isinstance(v, str) else str(v).replace("True", "true").replace(
+            "False", "false")
+    return "".join(f"[[{name}]]\n" + "".join(f"{k} = {lit(v)}\n" for k, v in r.items())
+                   for r in rows)
+
+
 def group_alive(pgid: int) -> bool:
     try:
         os.killpg(pgid, 0)

@@ -21,7 +21,7 @@ from bus.keys import Keys
 from bus.messages import CmdVel, LiveCmd, MocapPose, WireError, decode
 from hwbridge.config import ConfigError, loads
 from hwbridge.driver import CommandExpiry
-from procs import client_session, free_port
+from procs import client_session, free_port, toml_tables
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -45,23 +45,10 @@ geofence = "none"
 deadman_s = 0.3
 cmd_rate_hz = 20
 cmd_ttl_s = 0.3
-[[hwbridge.robots]]
-id = 1
-body = "fs1"
-start = [0.0, 0.0, 0.0]
-[[hwbridge.robots]]
-id = 2
-body = "fs2"
-output = "ros2"
-start = [0.0, 2.0, 0.0]
-[hwbridge.fake]
-latency_s = 0.02
-v_noise = 0.0
-w_noise = 0.0
-slip = 0.0
-mocap_noise_m = 0.0
-mocap_noise_rad = 0.0
-"""
+fake = {latency_s = 0.02, v_noise = 0.0, w_noise = 0.0, slip = 0.0, mocap_noise_m = 0.0, \
+mocap_noise_rad = 0.0}
+""" + toml_tables("hwbridge.robots", dict(id=1, body="fs1", start=[0.0, 0.0, 0.0]),
+                  dict(id=2, body="fs2", output="ros2", start=[0.0, 2.0, 0.0]))
 
 
 # --------------------------------------------------------------------------- pure parts
