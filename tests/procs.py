@@ -99,6 +99,34 @@ class Proc:
             break
 
 
+# the robot, sensing and world lines every small lockstep test room shares (a [world]
+# section left open: add seed, spawn, ... after it)
+LOCKSTEP_ROBOTS_TOML = """
+[robots]
+radius = 0.06
+kind = "holonomic"
+v_max = 0.5
+
+[sensing]
+noise_deg = 0.5
+n_touch = 8
+
+[world]
+dt = 0.05
+mode = "lockstep"
+"""
+
+
+def wait_until(pred, timeout: float, interval: float = 0.05) -> bool:
+    """Poll ``pred`` until it is true or ``timeout`` seconds pass; its last value."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(interval)
+    return bool(pred())
+
+
 def toml_tables(name: str, *rows: dict) -> str:
     """TOML text of an array of tables ``[[name]]``, one per row (values as TOML literals:
     str quoted, lists and numbers as written), for configs written inline in tests."""

@@ -14,7 +14,7 @@ import pytest
 
 from bus.keys import Keys
 from bus.messages import Status, Task, Truth
-from procs import client_session, decoded_into
+from procs import LOCKSTEP_ROBOTS_TOML, client_session, decoded_into
 
 pytestmark = pytest.mark.timeout(150)
 
@@ -26,19 +26,7 @@ rv = 1.0
 boundary = [[0, 0], [4, 0], [4, 3], [0, 3]]
 sources = [{x = 0.5, y = 1.5, theta = 0.0}]
 
-[robots]
-radius = 0.06
-kind = "holonomic"
-v_max = 0.5
-
-[sensing]
-noise_deg = 0.5
-n_touch = 8
-
-[world]
-dt = 0.05
-mode = "lockstep"
-seed = 3
+""" + LOCKSTEP_ROBOTS_TOML + """seed = 3
 spawn = [
   {robot = 0, pose = [2.0, 1.5, 0.0]},
   {robot = 1, pose = [2.8, 1.5, 0.0]},

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from procs import LOCKSTEP_ROBOTS_TOML
 from swarmcover.simloop import SimLoop
 from world.config import load_config
 from world.groundtruth import coverage_fraction
@@ -20,19 +21,7 @@ boundary = {boundary}
 obstacles = {obstacles}
 sources = [{source}]
 
-[robots]
-radius = 0.06
-kind = "holonomic"
-v_max = 0.5
-
-[sensing]
-noise_deg = 0.5
-n_touch = 8
-
-[world]
-dt = 0.05
-mode = "lockstep"
-seed = 0
+""" + LOCKSTEP_ROBOTS_TOML + """seed = 0
 """
 
 

@@ -21,7 +21,7 @@ from bus.keys import Keys
 from bus.messages import CmdVel, LiveCmd, MocapPose, WireError, decode
 from hwbridge.config import ConfigError, loads
 from hwbridge.driver import CommandExpiry
-from procs import client_session, free_port, toml_tables
+from procs import client_session, free_port, toml_tables, wait_until
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -148,7 +148,7 @@ def test_live_robot_stops_within_its_expiry_whoever_fails(procs, tmp_path, fault
     poses = Poses(s, keys)
     frozen = None
     try:
-        assert _wait(lambda: poses.last("fs1") and poses.last("fs2"), 20)
+        assert wait_until(lambda: poses.last("fs1") and poses.last("fs2"), 20)
         # an agent drives both robots straight ahead for 1.5 s, then falls silent at the fault
         end = time.monotonic() + 1.5
         while time.monotonic() < end:
@@ -196,15 +196,6 @@ def test_live_robot_stops_within_its_expiry_whoever_fails(procs, tmp_path, fault
         assert "expiry_stops=" in out and "expiry_stops=0 " not in out, out[-1000:]
 
 
-def _wait(pred, timeout, interval=0.05):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(interval)
-    return pred()
-
-
 # --------------------------------------------------------------------------- a whole run
 
 @pytest.mark.timeout(400)
@@ -238,7 +229,7 @@ def test_ctrl_c_on_a_mixed_run_stops_live_robots_first(procs, tmp_path):
         with lock:
             return any(mv and time.time() - t < 0.1 for t, _, mv in cmds[-10:])
     try:
-        assert _wait(driving, 300, interval=0.01), run.output()[-3000:]
+        assert wait_until(driving, 300, interval=0.01), run.output()[-3000:]
         t_int = time.time()
         run.signal(signal.SIGINT)
         assert run.wait(120) == 130, run.output()[-3000:]

@@ -14,7 +14,7 @@ import pytest
 from bus.keys import Keys
 from bus.messages import CmdVel, LiveCmd, Pose, decode
 from hwbridge.ros2 import cmd_vel_key, decode_twist
-from procs import client_session
+from procs import client_session, wait_until
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -73,15 +73,6 @@ class Recorder:
     def close(self):
         for s in self.subs:
             s.undeclare()
-
-
-def wait_until(pred, timeout, interval=0.05):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(interval)
-    return pred()
 
 
 def summary_of(proc):
