@@ -118,13 +118,9 @@ mode = "lockstep"
 
 
 def wait_until(pred, timeout: float, interval: float = 0.05) -> bool:
-    """Poll ``pred`` until it is true or ``timeout`` seconds pass; its last value."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(interval)
-    return bool(pred())
+    """Poll ``pred`` until it is true or ``timeout`` seconds pass (bus.session.wait_for)."""
+    from bus.session import wait_for
+    return wait_for(pred, timeout, interval)
 
 
 def toml_tables(name: str, *rows: dict) -> str:
