@@ -12,7 +12,9 @@ from the message and checks the claim again:
    triangles up to a closure inside O's one-hop closure zone, the coordinator's own
    criterion (``coordinator.certificate``), solved again on the rebuilt complex;
 4. with ground truth (``positions``, the world's): every occupant is a robot of the world,
-   and every edge joins robots at most rv apart (with ``tol`` for motion since the cycle).
+   every edge joins robots at most rv apart (with ``tol`` for motion since the cycle), and
+   every edge whose triangles all lie clearly on one side of it in the world is an
+   obstacle or an exception edge of the message (no open side left unclosed).
 
 It cannot tell whether O's edges are really walls (that is the coordinator's fence rule,
 from bearings and touch); the ground-truth coverage check in summary.json covers that.
@@ -33,7 +35,8 @@ class Recheck:
     def as_dict(self) -> dict:
         return {"ok": self.ok, "why": self.why,
                 "checked": "complex rebuilt from the message; K empty; O a GF(2) boundary of "
-                           "its triangles; occupants and edge lengths against ground truth"}
+                           "its triangles up to its closure zone; occupants, edge lengths and "
+                           "one-sided edges (all obstacle or exception) against ground truth"}
 
 
 def recheck(cx, positions: dict | None = None, rv: float | None = None,
