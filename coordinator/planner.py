@@ -68,7 +68,8 @@ class JobSpec:
     via_landmarks: list[int] = field(default_factory=list)    # probe approach: vertex ids
     via_bearings: list[float] = field(default_factory=list)   # and their desired bearings
     deployment: object = None      # the coordinator.fence.Deployment driven (for Evidence)
-    free: bool = False             # a probe off every path (path [f], nobody refills f)
+    free: bool = False             # a probe off every path (path [f], nobody refills f):
+                                   # it ends back at f whatever it found
 
 
 @dataclass
