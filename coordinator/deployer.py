@@ -36,7 +36,11 @@ SETTLED_STATES = ("holding", "idle")
 _PROBE_RETRIES = 12   # drives one push may make within a cycle while its probes touch
 # free probes (coordinator.planner.plan_cycle's free_probes): frontier robots away from every
 # push probe their sides without a path in the same cycle, and come back home whatever they
-# found (a clear one is booked as evidence.returned_probes, not as a clear probe)
+# found (a clear one is booked as evidence.returned_probes, not as a clear probe). In-process
+# seed 0, robots / cycles / sim s, off -> on: corridor_doors 77/98/1,935 -> 75/85/1,785 (5
+# free probes), small 33/31/746 -> 34/27/582 (1); small seed 2 36/28/625 -> 36/29/640; tiny
+# and small seed 1 unchanged (no free probe fits: a small room's probing side is one pair of
+# adjacent vertices, one of them on the push). All certified, no false certificate.
 _FREE_PROBES = True
 
 
