@@ -34,6 +34,14 @@ def td_length(spec: JobSpec, params) -> float:
 
 SETTLED_STATES = ("holding", "idle")
 _PROBE_RETRIES = 12   # drives one push may make within a cycle while its probes touch
+# free probes (coordinator.planner.plan_cycle's free_probes): frontier robots away from every
+# push probe their sides without a path in the same cycle, and come back home whatever they
+# found (a clear one is booked as evidence.returned_probes, not as a clear probe). In-process
+# seed 0, robots / cycles / sim s, off -> on: corridor_doors 77/98/1,935 -> 75/85/1,785 (5
+# free probes), small 33/31/746 -> 34/27/582 (1); small seed 2 36/28/625 -> 36/29/640; tiny
+# and small seed 1 unchanged (no free probe fits: a small room's probing side is one pair of
+# adjacent vertices, one of them on the push). All certified, no false certificate.
+_FREE_PROBES = True
 
 
 def _near_any(bearing: float, bearings, tol: float = 0.02) -> bool:
@@ -389,7 +397,8 @@ class Deployer:
                            and self.cycle % self.cfg.scale_correct_period == 0),
             test_drive=self.cfg.test_drive, next_vertex=self.next_vertex,
             lattice_spacing=self.cfg.d0 if self.cfg.lattice else None,
-            evidence=self._evidence_kw(snap))
+            evidence=self._evidence_kw(snap), free_probes=_FREE_PROBES,
+            returned_probes=self.evidence.returned_probes(snap.occupant))
         self.next_vertex += len(plan.jobs)
         self.redundant = set(plan.redundant)
         self._out.append(("complex", self._complex_msg(plan, now, "running")))
@@ -584,6 +593,9 @@ class Deployer:
                 if not job.aborted:
                     self._test_drive_failed(job, td)
                 return
+            if spec.free:
+                self._free_probe_home(job, td, now)
+                return
             placed = self._placed_by(td, spec)
             if placed and dep.state == "pending":
                 # the robot is the new vertex where its drive ended: no deploy, no refine
@@ -633,6 +645,33 @@ class Deployer:
                 self._start(ref, task, now)
         if self.cfg.settle_moves:
             self._settle_moves(job, now)
+
+    def _free_probe_home(self, job: PushJob, td: Step, now: float) -> None:
+        """A free probe that drove clear (no path: nobody would refill its vertex) goes back
+        home on its vertex's landmarks, as after a touch; its probe is booked as returned
+        (evidence.returned_probes): no evidence, the side stays open, and it is not offered
+        free again. The deploy and refine steps never run."""
+        if job.step("home") is not None:
+            return
+        spec = job.spec
+        f = spec.path[-1]
+        if spec.deployment is not None:
+            self.evidence.record(spec.deployment, False, direction=float(spec.direction),
+                                 returned=True)
+        for s in job.steps:
+            if s.state == "pending":
+                s.state, s.reason = "cancelled", "free probe goes home"
+        home = Step("home", td.robot, f)
+        job.steps.append(home)
+        lm, br = self._vertex_landmarks(f, exclude=set())
+        lm_r = [r for r in lm if r != td.robot]
+        br = [b for r, b in zip(lm, br) if r != td.robot]
+        task = Task(kind="goto", vertex=f, landmarks=lm_r, bearings=br,
+                    ref_offsets=self._chained_offsets(f, lm_r),
+                    timeout_s=self.cfg.task_timeout_s)
+        log.info("cycle %d: free probe from vertex %d at %.2f of %s found room: back home",
+                 self.cycle, f, spec.via_frac, spec.frontier_edge)
+        self._start(home, task, now)
 
     @staticmethod
     def _source_robot(job: PushJob):
@@ -813,14 +852,16 @@ class Deployer:
         gone = {v for v, rid in snap.occupant.items()
                 if not self._live(rid) or rid in self.left or self.vertex_of.get(rid) != v}
         if job.spec.free:
-            # a free probe stays at its vertex (nobody refills it): only its next probe
+            # a free probe keeps its vertex (nobody refills it): only its next probe
             gone |= set(snap.occupant) - {job.spec.path[0]}
         spec = replan_push(
             snap, self.params, start=job.spec.path[0], busy=busy, exclude=gone,
             test_drive_failures={v: b for v, b in self.td_failures.items() if v in snap.occupant},
             new_vertex=self.next_vertex, scale_correct=job.spec.scale_correct,
             test_drive=True, lattice_spacing=self.cfg.d0 if self.cfg.lattice else None,
-            evidence=self._evidence_kw(snap))
+            evidence=self._evidence_kw(snap),
+            skip_probes=(self.evidence.returned_probes(snap.occupant) if job.spec.free
+                         else frozenset()))
         if spec is None or (job.spec.free and spec.kind != "probe"):
             return False
         spec.free = job.spec.free

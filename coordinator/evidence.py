@@ -110,15 +110,23 @@ class Evidence:
         self._failed: dict[int, list[float]] = {}
         self._probes: set[ProbeKey] = set()
         self._clear: set[ProbeKey] = set()
+        # interior probes a FREE probe (no path, nobody refills its vertex) drove clear and
+        # came back from: no evidence, the side stays open; never offered free again
+        self._returned: set[ProbeKey] = set()
         # (probe key, end it was driven from) -> approach legs that failed from that end
         self._approach_fails: dict[tuple[ProbeKey, int], int] = {}
 
     # ---------------------------------------------------------------- recording
-    def record(self, dep, touched: bool, *, direction: float | None = None) -> DriveRecord:
+    def record(self, dep, touched: bool, *, direction: float | None = None,
+               returned: bool = False) -> DriveRecord:
         """Record the outcome of driving ``dep`` (a coordinator.fence.Deployment, or anything
         with its fields). ``direction`` overrides dep.bearing (the direction actually driven,
         e.g. after lattice placement). ``touched``: the drive failed with a touch before it
-        found room (a touch far enough out to keep the robot there is room, not a touch)."""
+        found room (a touch far enough out to keep the robot there is room, not a touch).
+        ``returned``: a clear drive whose robot went back to its vertex (a free probe, see
+        coordinator.planner.plan_cycle): nobody stayed in the room it found, so it is not a
+        clear probe (those close a still one-sided side as the inference 'probe_clear'); its
+        key goes to :meth:`returned_probes` only and the side stays open."""
         d = float(dep.bearing if direction is None else direction)
         frac = float(getattr(dep, "via_frac", 0.0) or 0.0)
         edge = tuple(int(x) for x in dep.edge) if dep.edge is not None else None
@@ -131,6 +139,8 @@ class Evidence:
                 self._probes.add(probe_key(rec.vertex, edge, rec.sigma, frac))
             else:
                 self.add_failed_direction(rec.vertex, d)
+        elif interior and returned:
+            self._returned.add(probe_key(rec.vertex, edge, rec.sigma, frac))
         elif interior:
             # a clear interior probe found room (its robot stays there): that fraction is
             # done, it is never offered again (re-offering it stacked robots: issue 21)
@@ -174,6 +184,13 @@ class Evidence:
     def clear_probes(self, present: Container[int] | None = None) -> frozenset[ProbeKey]:
         """Keys of interior probes that found room: detect_fence's ``probe_clear``."""
         return frozenset(k for k in self._clear
+                         if present is None or (k[0] in present and k[1] in present))
+
+    def returned_probes(self, present: Container[int] | None = None) -> frozenset[ProbeKey]:
+        """Keys of interior probes a free probe drove clear and came back from (no evidence;
+        not part of :meth:`fence_kwargs`): the planner's ``returned_probes``, which it never
+        offers as free probes again (a push along a path may still take them)."""
+        return frozenset(k for k in self._returned
                          if present is None or (k[0] in present and k[1] in present))
 
     def unreachable_probes(self, present: Container[int] | None = None

@@ -68,7 +68,8 @@ class JobSpec:
     via_landmarks: list[int] = field(default_factory=list)    # probe approach: vertex ids
     via_bearings: list[float] = field(default_factory=list)   # and their desired bearings
     deployment: object = None      # the coordinator.fence.Deployment driven (for Evidence)
-    free: bool = False             # a probe off every path (path [f], nobody refills f)
+    free: bool = False             # a probe off every path (path [f], nobody refills f):
+                                   # it ends back at f whatever it found
 
 
 @dataclass
@@ -119,7 +120,8 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
                test_drive_failures: dict[int, list[float]], previous_redundant: set,
                protected: set, max_paths: int, scale_correct: bool, test_drive: bool,
                next_vertex: int, lattice_spacing: float | None = None,
-               evidence: dict | None = None, free_probes: bool = False) -> CyclePlan:
+               evidence: dict | None = None, free_probes: bool = False,
+               returned_probes: frozenset = frozenset()) -> CyclePlan:
     """Decide one cycle. ``next_vertex``: the first unused vertex id (for new positions).
 
     lattice_spacing: when set (rv units) and every robot is holonomic, each new position
@@ -130,9 +132,11 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     test_drive_failures: vertex -> directions of test drives that touched a wall (sticky).
     evidence: further detect_fence keywords from coordinator.evidence (probe_failures,
     probe_fracs, probe_unreachable).
-    free_probes: also let frontier robots off every push probe without a path (off by
-    default: a clear one leaves its vertex empty, and on corridor_doors an empty cut vertex
-    cut whole chains off the sources).
+    free_probes: also let frontier robots away from every push probe their side without a
+    path (a JobSpec with ``free``; the deployer sends a clear one back home, so no vertex is
+    left empty). returned_probes: probe keys (coordinator.evidence.probe_key) a free probe
+    already drove clear and came back from: never offered as a free probe again (their side
+    stays open; a push along a path may still take them, and its robot stays there).
     certified is False whenever the fence has no one-sided edge (an empty target cycle
     proves nothing).
     previous_redundant: redundant vertices found earlier (used as path starts until the
@@ -187,44 +191,73 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
         plan.jobs.append(_job_spec(snap, params, pth, vid, test_drive, scale_correct))
         vid += 1
     # free probes: a frontier robot away from every push probes its side in the same cycle,
-    # without a path. Most probes touch and cost nothing else; one that finds room leaves
-    # its robot there as the new vertex and its old vertex empty, a hole the next cycles
-    # refill. Its vertex, and every neighbour of it (its landmarks), must be off every push
-    # and off every other probe's neighbourhood.
+    # without a path; clear or not, it ends back at its vertex (the deployer homes it). A
+    # probe homes on its vertex's neighbours (its landmarks), which must hold still, and
+    # nobody may home on a mover: f must be off every mover (push paths, sources, other free
+    # probers) and off every other job's landmarks (the neighbours of its movers), and f's
+    # neighbours off every mover. With symmetric neighbourhoods both say: f is neither a
+    # mover nor next to one. Landmarks may be shared.
+    if free_probes:
+        _add_free_probes(snap, params, cx, fence, plan, vid, max_paths, returned_probes)
+    if lattice_spacing and plan.jobs:
+        _place_on_lattice(snap, plan.jobs, float(lattice_spacing), params, test_drive_failures)
+    return plan
+
+
+def _free_probe_deps(fence, f: int, skip) -> list:
+    """f's probe deployments whose key is not in ``skip`` (probes already driven free)."""
+    from .evidence import probe_key
+
+    out = []
+    for d in fence.deployments.get(f, ()):
+        if d.kind != "probe" or d.edge is None:
+            continue
+        if probe_key(d.vertex, d.edge, d.sigma, d.via_frac) in skip:
+            continue
+        out.append(d)
+    return out
+
+
+def _add_free_probes(snap: Snapshot, params: TopologyParams, cx, fence, plan: CyclePlan,
+                     vid: int, max_paths: int, returned) -> None:
+    """Append free probes to ``plan.jobs`` (see plan_cycle's free_probes): at most
+    ``max_paths``, lowest frontier vertex first, each at a vertex that is neither a mover
+    (push path, source, earlier free prober) nor a neighbour of one."""
     from .paths import PushPath
-    block: set[int] = set(snap.sources)
+
+    movers: set[int] = set(int(s) for s in snap.sources)
     for job in plan.jobs:
-        for v in job.path:
-            block.add(int(v))
-            if v in cx:
-                block.update(int(x) for x in cx.neighbours(v))
+        movers.update(int(v) for v in job.path)
+    near: set[int] = set(movers)
+    for v in movers:
+        if v in cx:
+            near.update(int(x) for x in cx.neighbours(v))
+    skip = frozenset(returned)
     n_free = 0
-    for f in sorted(fence.deployments) if free_probes else ():
+    for f in sorted(fence.deployments):
         if n_free >= max_paths:
             break
-        if f in block or f not in cx:
+        f = int(f)
+        if f in near or f not in cx or f not in snap.occupant:
             continue
-        probes = [d for d in fence.deployments[f] if d.kind == "probe"]
-        nb = {int(x) for x in cx.neighbours(f)}
-        if not probes or nb & block:
+        probes = _free_probe_deps(fence, f, skip)
+        if not probes:
             continue
-        spec = _job_spec(snap, params, PushPath((int(f),), probes[0], 0.0), vid, True, False)
+        spec = _job_spec(snap, params, PushPath((f,), probes[0], 0.0), vid, True, False)
         spec.free = True
         plan.jobs.append(spec)
         vid += 1
         n_free += 1
-        block.add(int(f))
-        block.update(nb)
-    if lattice_spacing and plan.jobs:
-        _place_on_lattice(snap, plan.jobs, float(lattice_spacing), params, test_drive_failures)
-    return plan
+        movers.add(f)
+        near.add(f)
+        near.update(int(x) for x in cx.neighbours(f))
 
 
 def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: list[JobSpec],
                 exclude: set[int], test_drive_failures: dict[int, list[float]],
                 new_vertex: int, scale_correct: bool, test_drive: bool,
                 lattice_spacing: float | None = None,
-                evidence: dict | None = None) -> JobSpec | None:
+                evidence: dict | None = None, skip_probes=frozenset()) -> JobSpec | None:
     """The next-best push from ``start`` within this cycle, after a test drive touched
     (spec 3.4(iv): "choose the next-best frontier"), or None.
 
@@ -234,12 +267,23 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
     busy: the other pushes of this cycle; their paths, and every neighbour of their
     frontier vertices, are not used (their occupants are moving or about to), and a lattice
     position keeps clear of their targets. exclude: further vertices no path may use.
+    skip_probes: probe keys not to offer (a free probe's retry: those it drove clear).
     """
     from .paths import plan_pushes
 
     cx, fence = _complex_and_fence(snap, params, test_drive_failures, evidence)
     if start not in cx:
         return None
+    if skip_probes:
+        from dataclasses import replace
+
+        deps = {}
+        for f, lst in fence.deployments.items():
+            keep = _free_probe_deps(fence, f, skip_probes)
+            lst = tuple(d for d in lst if d.kind != "probe" or d in keep)
+            if lst:
+                deps[f] = lst
+        fence = replace(fence, deployments=deps)
     used = set(exclude) | _claimed(cx, [job.path for job in busy])
     used.discard(start)
     found = plan_pushes(cx, fence, [start], (), params=params, max_paths=1, exclude=used)

@@ -1,0 +1,207 @@
+"""Free probes (issue 21/19): a frontier robot away from every push probes its fence side in
+the same cycle without a path, and always ends back at its own vertex.
+
+A clear free probe is no evidence (nobody stays in the room it found): it is booked as
+"returned", its side stays open, it is never offered free again, and a push along a path
+may still take it. Pure cores only: the planner on a snapshot, the deployer fed statuses.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from bus.messages import Status
+from coordinator import build_complex, detect_fence
+from coordinator.config import CoordinatorConfig
+from coordinator.deployer import Deployer, Robot
+from coordinator.evidence import Evidence, probe_key
+from coordinator.params import TopologyParams
+from coordinator.planner import Snapshot, plan_cycle, replan_push
+
+DEG = math.pi / 180
+
+# robots 0 and 1 rest on a wall (y = 0.07) with a 0.8 m door between them, apex 2 below
+# them, source 3 below the apex (it sees the apex only), vertex 4 beside the source
+DOOR = np.array([[0.0, 0.0], [0.95, 0.0], [0.475, -0.75], [0.475, -1.5], [1.3, -1.5]])
+
+
+def _nbrs(P, i):
+    return {j: math.atan2(q[1] - P[i][1], q[0] - P[i][0]) for j, q in enumerate(P)
+            if j != i and math.dist(P[i], q) <= 1.0}
+
+
+def _snap(P=DOOR, touch=None):
+    touch = {0: 90 * DEG, 1: 90 * DEG} if touch is None else touch
+    return Snapshot(occupant={v: 100 + v for v in range(len(P))},
+                    nbrs={v: _nbrs(P, v) for v in range(len(P))}, contact=dict(touch),
+                    sources=[3], source_dirs=[90 * DEG])
+
+
+def _plan(snap, **kw):
+    args = dict(cycle=1, redundancy=False, test_drive_failures={}, previous_redundant=set(),
+                protected=set(), max_paths=1, scale_correct=False, test_drive=True,
+                next_vertex=10)
+    args.update(kw)
+    return plan_cycle(snap, TopologyParams(d_td=0.9), **args)
+
+
+def _key(spec):
+    d = spec.deployment
+    return probe_key(d.vertex, d.edge, d.sigma, d.via_frac)
+
+
+def _door_fence(ev):
+    rep = {v: {"neighbours": nb, "touch": v in (0, 1), "touch_bearing": 90 * DEG}
+           for v, nb in ((v, _nbrs(DOOR[:3], v)) for v in range(3))}
+    cx = build_complex(rep)
+    return cx, detect_fence(cx, **ev.fence_kwargs())
+
+
+def test_a_returned_probe_is_no_evidence_and_keeps_its_side_open():
+    ev = Evidence()
+    cx, f = _door_fence(ev)
+    e = int(cx.edge_index(0, 1))
+    probes = [d for lst in f.deployments.values() for d in lst if d.kind == "probe"]
+    mid = next(d for d in probes if d.via_frac == 0.5)
+    k = probe_key(mid.vertex, mid.edge, mid.sigma, mid.via_frac)
+    ev.record(mid, touched=False, returned=True)
+    assert ev.returned_probes() == {k} and not ev.clear_probes() and not ev.failed_probes()
+    assert set(ev.fence_kwargs()) == {"test_drive_failures", "probe_failures", "probe_clear",
+                                      "probe_unreachable", "probe_fracs"}
+    # every other probe touches: the side stays frontier, the returned one still offered
+    # (a recorded CLEAR probe would now close it as the inference 'probe_clear')
+    for d in probes:
+        if probe_key(d.vertex, d.edge, d.sigma, d.via_frac) != k:
+            ev.record(d, touched=True)
+    _, f = _door_fence(ev)
+    left = {probe_key(d.vertex, d.edge, d.sigma, d.via_frac)
+            for lst in f.deployments.values() for d in lst if d.kind == "probe"}
+    assert left == {k} and e in f.frontier.tolist() and not f.obstacle.size
+    assert not f.inferred
+    # a push along a path that takes it and finds room stays there: a clear probe as ever
+    ev.record(mid, touched=False)
+    assert ev.clear_probes() == {k}
+
+
+def test_a_free_probe_needs_only_its_vertex_clear_of_movers_and_their_neighbours():
+    snap = _snap()
+    plan = _plan(snap, free_probes=True)
+    push = [j for j in plan.jobs if not j.free]
+    free = [j for j in plan.jobs if j.free]
+    assert push and all(3 in j.path for j in push)
+    movers = {v for j in push for v in j.path} | {3}
+    # vertex 0's neighbour 2 is next to the source (a mover): the old rule (f's neighbours
+    # off every job's neighbourhood) blocked it; its landmarks 1 and 2 hold still now
+    assert 2 in snap.nbrs[0] and 3 in snap.nbrs[2]
+    assert [j.path for j in free] == [[0]] and free[0].kind == "probe"
+    assert not movers & ({0} | set(snap.nbrs[0]))
+    # vertex 1 is a neighbour of prober 0: it would home on a mover; no second free probe
+    assert all(j.path != [1] for j in free)
+    # off by default
+    assert not any(j.free for j in _plan(snap).jobs)
+
+
+def test_a_returned_probe_is_never_offered_free_again_but_paths_still_may_take_it():
+    snap = _snap()
+    keys = set()
+    for _ in range(10):
+        free = [j for j in _plan(snap, free_probes=True, returned_probes=frozenset(keys)).jobs
+                if j.free]
+        if not free:
+            break
+        assert _key(free[0]) not in keys
+        keys.add(_key(free[0]))
+    assert {k[3] for k in keys} == {0.25, 0.5, 0.75}   # each probe of the door side once
+    # the path pushes do not see the returned set: the same jobs with it as without it
+    plain = _plan(snap, max_paths=4)
+    ret = _plan(snap, max_paths=4, returned_probes=frozenset(keys))
+    assert [(j.path, j.kind, j.via_frac) for j in plain.jobs] == \
+        [(j.path, j.kind, j.via_frac) for j in ret.jobs]
+    # a free probe's retry skips them; any other re-planned push may take them
+    kw = dict(start=0, busy=[], exclude={1, 2, 3, 4}, test_drive_failures={}, new_vertex=10,
+              scale_correct=False, test_drive=True)
+    any_push = replan_push(snap, TopologyParams(d_td=0.9), **kw)
+    free_retry = replan_push(snap, TopologyParams(d_td=0.9), skip_probes=frozenset(keys), **kw)
+    assert any_push.kind == "probe" and _key(any_push) in keys
+    assert free_retry is None or free_retry.kind != "probe"
+
+
+def _deployer(snap):
+    dep = Deployer(CoordinatorConfig(), sources=[90 * DEG])
+    dep.snapshot = snap
+    dep._snap_vertex_of = {r: v for v, r in snap.occupant.items()}
+    seq = iter(range(1, 10_000))
+    for v, rid in snap.occupant.items():
+        dep.vertex_of[rid] = v
+        dep.robots[rid] = Robot(rid, alive=True, status=Status(
+            robot=rid, seq=next(seq), t=0.0, state="holding", vertex=v,
+            nbr_ids=[snap.occupant[u] for u in snap.nbrs[v]],
+            nbr_bearings=list(snap.nbrs[v].values())))
+    return dep, seq
+
+
+def _tasks(dep):
+    return [a[2] for a in dep._out if a[0] == "task"]
+
+
+def test_a_clear_free_probe_goes_back_home_and_is_booked_as_returned():
+    snap = _snap()
+    spec = next(j for j in _plan(snap, free_probes=True).jobs if j.free)
+    f, rid = spec.path[0], snap.occupant[spec.path[0]]
+    dep, seq = _deployer(snap)
+    job = dep._make_job(spec)
+    dep.jobs = [job]
+    dep._out = []
+    dep._advance_job(job, 1.0)
+    (td,) = _tasks(dep)
+    assert td.kind == "test_drive" and td.robot == rid and td.keep_after == 0.0
+    assert td.via_landmarks                        # to its point on the edge first
+    # the drive found room: the agent reports it done where it ended
+    dep.on_status(Status(robot=rid, seq=next(seq), t=2.0, state="holding", vertex=f,
+                         task_id=td.task_id, task_state="done"))
+    dep._out = []
+    dep._advance_job(job, 2.0)
+    (home,) = _tasks(dep)
+    # home: goto its own vertex on its neighbours' robots and its own recorded bearings
+    assert home.kind == "goto" and home.vertex == f and home.robot == rid
+    want = {snap.occupant[u]: b for u, b in snap.nbrs[f].items()}
+    assert dict(zip(home.landmarks, home.bearings)) == want
+    assert job.step("deploy").state == "cancelled" and job.step("refine").state == "cancelled"
+    assert dep.evidence.returned_probes() == {_key(spec)}
+    assert not dep.evidence.clear_probes() and not dep.evidence.failed_probes()
+    dep._out = []
+    dep._advance_job(job, 2.5)                     # nothing more to send
+    assert not _tasks(dep)
+    dep.on_status(Status(robot=rid, seq=next(seq), t=3.0, state="holding", vertex=f,
+                         task_id=home.task_id, task_state="done"))
+    assert job.finished and dep.vertex_of[rid] == f
+    # nobody was left out of place: the next snapshot has every vertex occupied
+    assert set(dep.build_snapshot().occupant) == set(snap.occupant)
+    # and the next plan does not offer that probe free again
+    nxt = _plan(snap, free_probes=True, returned_probes=dep.evidence.returned_probes())
+    assert all(_key(j) != _key(spec) for j in nxt.jobs if j.free)
+
+
+def test_a_free_probe_that_touched_books_evidence_and_tries_its_next_probe():
+    snap = _snap()
+    spec = next(j for j in _plan(snap, free_probes=True).jobs if j.free)
+    f, rid = spec.path[0], snap.occupant[spec.path[0]]
+    dep, seq = _deployer(snap)
+    job = dep._make_job(spec)
+    dep.jobs = [job]
+    dep._out = []
+    dep._advance_job(job, 1.0)
+    (td,) = _tasks(dep)
+    dep.on_status(Status(robot=rid, seq=next(seq), t=2.0, state="holding", vertex=f,
+                         task_id=td.task_id, task_state="failed", reason="touch"))
+    dep._out = []
+    dep._advance_job(job, 2.0)
+    assert _key(spec) in dep.evidence.failed_probes()
+    assert not dep.evidence.returned_probes()
+    # re-planned at once at the same vertex, still free, another probe
+    assert job.spec.free and job.spec.path == [f] and job.spec.kind == "probe"
+    assert _key(job.spec) != _key(spec)
+    dep._advance_job(job, 2.0)
+    (td2,) = _tasks(dep)
+    assert td2.kind == "test_drive" and td2.robot == rid and td2.vertex == f
