@@ -34,14 +34,6 @@ def td_length(spec: JobSpec, params) -> float:
 
 SETTLED_STATES = ("holding", "idle")
 _PROBE_RETRIES = 12   # drives one push may make within a cycle while its probes touch
-# free probes (coordinator.planner.plan_cycle's free_probes): frontier robots away from every
-# push probe their sides without a path in the same cycle, and come back home whatever they
-# found (a clear one is booked as evidence.returned_probes, not as a clear probe). In-process
-# seed 0, robots / cycles / sim s, off -> on: corridor_doors 77/98/1,935 -> 75/85/1,785 (5
-# free probes), small 33/31/746 -> 34/27/582 (1); small seed 2 36/28/625 -> 36/29/640; tiny
-# and small seed 1 unchanged (no free probe fits: a small room's probing side is one pair of
-# adjacent vertices, one of them on the push). All certified, no false certificate.
-_FREE_PROBES = True
 
 
 def _near_any(bearing: float, bearings, tol: float = 0.02) -> bool:
@@ -397,7 +389,7 @@ class Deployer:
                            and self.cycle % self.cfg.scale_correct_period == 0),
             test_drive=self.cfg.test_drive, next_vertex=self.next_vertex,
             lattice_spacing=self.cfg.d0 if self.cfg.lattice else None,
-            evidence=self._evidence_kw(snap), free_probes=_FREE_PROBES,
+            evidence=self._evidence_kw(snap), free_probes=self.cfg.free_probes,
             returned_probes=self.evidence.returned_probes(snap.occupant))
         self.next_vertex += len(plan.jobs)
         self.redundant = set(plan.redundant)
