@@ -19,7 +19,7 @@ from typing import Callable
 
 from bus.messages import Complex, Remove, Spawn, Status, Task
 
-from .angles import wrap
+from ground.angles import wrap
 from .config import CoordinatorConfig
 from .evidence import Evidence
 from .planner import CyclePlan, JobSpec, Snapshot, plan_cycle, replan_push
