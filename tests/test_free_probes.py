@@ -145,7 +145,9 @@ def _tasks(dep):
     return [a[2] for a in dep._out if a[0] == "task"]
 
 
-def test_a_clear_free_probe_goes_back_home_and_is_booked_as_returned():
+def _start_free_probe():
+    """The first free probe of _snap's plan, started: (snap, spec, its vertex f, its robot,
+    the deployer, the status seq counter, the job, the test-drive task sent)."""
     snap = _snap()
     spec = next(j for j in _plan(snap, free_probes=True).jobs if j.free)
     f, rid = spec.path[0], snap.occupant[spec.path[0]]
@@ -155,6 +157,11 @@ def test_a_clear_free_probe_goes_back_home_and_is_booked_as_returned():
     dep._out = []
     dep._advance_job(job, 1.0)
     (td,) = _tasks(dep)
+    return snap, spec, f, rid, dep, seq, job, td
+
+
+def test_a_clear_free_probe_goes_back_home_and_is_booked_as_returned():
+    snap, spec, f, rid, dep, seq, job, td = _start_free_probe()
     assert td.kind == "test_drive" and td.robot == rid and td.keep_after == 0.0
     assert td.via_landmarks                        # to its point on the edge first
     # the drive found room: the agent reports it done where it ended
@@ -184,15 +191,7 @@ def test_a_clear_free_probe_goes_back_home_and_is_booked_as_returned():
 
 
 def test_a_free_probe_that_touched_books_evidence_and_tries_its_next_probe():
-    snap = _snap()
-    spec = next(j for j in _plan(snap, free_probes=True).jobs if j.free)
-    f, rid = spec.path[0], snap.occupant[spec.path[0]]
-    dep, seq = _deployer(snap)
-    job = dep._make_job(spec)
-    dep.jobs = [job]
-    dep._out = []
-    dep._advance_job(job, 1.0)
-    (td,) = _tasks(dep)
+    snap, spec, f, rid, dep, seq, job, td = _start_free_probe()
     dep.on_status(Status(robot=rid, seq=next(seq), t=2.0, state="holding", vertex=f,
                          task_id=td.task_id, task_state="failed", reason="touch"))
     dep._out = []
