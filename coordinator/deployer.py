@@ -655,12 +655,9 @@ class Deployer:
                 s.state, s.reason = "cancelled", "free probe goes home"
         home = Step("home", td.robot, f)
         job.steps.append(home)
-        lm, br = self._vertex_landmarks(f, exclude=set())
-        lm_r = [r for r in lm if r != td.robot]
-        br = [b for r, b in zip(lm, br) if r != td.robot]
-        task = Task(kind="goto", vertex=f, landmarks=lm_r, bearings=br,
-                    ref_offsets=self._chained_offsets(f, lm_r),
-                    timeout_s=self.cfg.task_timeout_s)
+        lm, br = self._vertex_landmarks(f, exclude=set())   # f's neighbours: never td.robot
+        task = Task(kind="goto", vertex=f, landmarks=lm, bearings=br,
+                    ref_offsets=self._chained_offsets(f, lm), timeout_s=self.cfg.task_timeout_s)
         log.info("cycle %d: free probe from vertex %d at %.2f of %s found room: back home",
                  self.cycle, f, spec.via_frac, spec.frontier_edge)
         self._start(home, task, now)

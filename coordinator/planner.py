@@ -204,18 +204,21 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     return plan
 
 
-def _free_probe_deps(fence, f: int, skip) -> list:
-    """f's probe deployments whose key is not in ``skip`` (probes already driven free)."""
-    from .evidence import probe_key
+def _without_probes(fence, skip):
+    """``fence`` with the probe deployments whose key (coordinator.evidence.probe_key) is in
+    ``skip`` left out (probes already driven free); ``fence`` itself when skip is empty."""
+    if not skip:
+        return fence
+    from dataclasses import replace
 
-    out = []
-    for d in fence.deployments.get(f, ()):
-        if d.kind != "probe" or d.edge is None:
-            continue
-        if probe_key(d.vertex, d.edge, d.sigma, d.via_frac) in skip:
-            continue
-        out.append(d)
-    return out
+    from .evidence import probe_key
+    deps = {}
+    for f, lst in fence.deployments.items():
+        lst = tuple(d for d in lst if d.kind != "probe" or d.edge is None
+                    or probe_key(d.vertex, d.edge, d.sigma, d.via_frac) not in skip)
+        if lst:
+            deps[f] = lst
+    return replace(fence, deployments=deps)
 
 
 def _add_free_probes(snap: Snapshot, params: TopologyParams, cx, fence, plan: CyclePlan,
@@ -232,7 +235,7 @@ def _add_free_probes(snap: Snapshot, params: TopologyParams, cx, fence, plan: Cy
     for v in movers:
         if v in cx:
             near.update(int(x) for x in cx.neighbours(v))
-    skip = frozenset(returned)
+    fence = _without_probes(fence, frozenset(returned))
     n_free = 0
     for f in sorted(fence.deployments):
         if n_free >= max_paths:
@@ -240,7 +243,7 @@ def _add_free_probes(snap: Snapshot, params: TopologyParams, cx, fence, plan: Cy
         f = int(f)
         if f in near or f not in cx or f not in snap.occupant:
             continue
-        probes = _free_probe_deps(fence, f, skip)
+        probes = [d for d in fence.deployments[f] if d.kind == "probe" and d.edge is not None]
         if not probes:
             continue
         spec = _job_spec(snap, params, PushPath((f,), probes[0], 0.0), vid, True, False)
@@ -274,16 +277,7 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
     cx, fence = _complex_and_fence(snap, params, test_drive_failures, evidence)
     if start not in cx:
         return None
-    if skip_probes:
-        from dataclasses import replace
-
-        deps = {}
-        for f, lst in fence.deployments.items():
-            keep = _free_probe_deps(fence, f, skip_probes)
-            lst = tuple(d for d in lst if d.kind != "probe" or d in keep)
-            if lst:
-                deps[f] = lst
-        fence = replace(fence, deployments=deps)
+    fence = _without_probes(fence, skip_probes)
     used = set(exclude) | _claimed(cx, [job.path for job in busy])
     used.discard(start)
     found = plan_pushes(cx, fence, [start], (), params=params, max_paths=1, exclude=used)
