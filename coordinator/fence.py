@@ -61,20 +61,19 @@ _DEEP = 2.0 * math.pi / 3.0
 _SINGLE_CLEAR = math.radians(50.0)
 # TopologyParams.corner_probes: convex-corner marks (spec 3.3 ii) make a side a probing
 # candidate rather than closing it (True), or close it as inferred 'convex_corner' (False).
-# Off by default: bench/truth.py seed 0 maps
-# 0-12 with it on (and _CLEAR_INFERS on) ran clutter maps 10, 11, 12 to the robot cap (99,
-# 81, 80 robots; clear probes off box corners place robots that form new corners), so
-# tests/test_truth.py cannot pass either way; map 11 (a free-standing box) is then still a
-# false certificate by this rule (issue 21 item 3 open).
-# TopologyParams.clear_infers: a side whose probes are all done, some clear (room found, its robot stayed) while the side
-# is still one-sided: False leaves it frontier with no deployment (uncertified); True closes
-# it as inferred ('probe_clear'). bench/truth.py seed 0 (corner probes off): False, maps
-# 0-39: 14 fixed (all certified), 26 stuck (22 of them >= 99.9 % covered: unreached probes
-# from both ends, or a clear probe), 0 livelock, 0 cap, 46.2 robots; True, maps 0-36: 21
-# certified, 16 stuck, no false certificate beyond False's (#11 convex corner, #18 a 0.30
-# rv door). On by default: with it off, corridor_doors (seed 0, in-process) stopped
-# uncertified after 114 cycles with one such side left ("no feasible push"). The closure is
-# reported as inferred.
+# Off by default: bench/truth.py seed 0 maps 0-12 with it on (and clear_infers on) ran
+# clutter maps 10, 11, 12 to the robot cap (99, 81, 80 robots; clear probes off box corners
+# place robots that form new corners), so tests/test_truth.py cannot pass either way; map
+# 11 (a free-standing box) is then still a false certificate by this rule (issue 21).
+# TopologyParams.clear_infers: a side whose probes are all done, some clear (room found,
+# its robot stayed) while the side is still one-sided: False leaves it frontier with no
+# deployment (uncertified); True closes it as inferred ('probe_clear'). bench/truth.py seed
+# 0 (corner probes off): False, maps 0-39: 14 fixed (all certified), 26 stuck (22 of them
+# >= 99.9 % covered: unreached probes from both ends, or a clear probe), 0 livelock, 0 cap,
+# 46.2 robots; True, maps 0-36: 21 certified, 16 stuck, no false certificate beyond False's
+# (#11 convex corner, #18 a 0.30 rv door). On by default: with it off, corridor_doors (seed
+# 0, in-process) stopped uncertified after 114 cycles with one such side left ("no
+# feasible push"). The closure is reported as inferred.
 
 
 @dataclass(frozen=True)
@@ -410,8 +409,8 @@ def detect_fence(
       failing) is offered from the other end only. Neither is evidence of a wall: a side
       whose probes are all touched, clear or unreached from both ends, with one not
       touched, stays frontier ('probing') with no deployment, and the run ends uncertified
-      (``TopologyParams.clear_infers`` instead closes it as inferred 'probe_clear' when some probe was
-      clear and none is left).
+      (``TopologyParams.clear_infers`` instead closes it as inferred 'probe_clear' when
+      some probe was clear and none is left).
     Inferred closures (no probe): the convex-corner / occlusion rule (pi/3 - 2 beta, reason
     'convex_corner') and ``forced_obstacle`` ('forced'); ``Fence.inferred`` lists them.
     Guarantee: with edges <= rv, for a side closed on evidence, every opening at least
@@ -428,7 +427,7 @@ def detect_fence(
     probe_failures: keys (u, v, sigma, fraction from u) of interior probes that touched.
     probe_fracs: fractions where probes go (default ``evidence.probe_fractions()``).
     probe_unreachable: (u, v, sigma, fraction, end): interior probes given up from that
-      end (their approach kept failing); a bare 4-tuple key: given up from both ends.
+      end (their approach kept failing).
     probe_clear: keys of interior probes that found room (done, not offered again).
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
       e.g. edges reclassified after a failed test drive in an earlier cycle.
@@ -586,13 +585,11 @@ def detect_fence(
 
     pfail = {_key(k) for k in probe_failures}
     pclear = {_key(k) for k in probe_clear}
-    # unreached: (key, end) given up from that end; a bare key (older callers): both ends
-    punreach: set[tuple[tuple[int, int, int, float], int | None]] = set()
-    for k in probe_unreachable:
-        punreach.add((_key(k), int(k[4]) if len(k) > 4 else None))
+    # unreached: (key, end) given up from that end
+    punreach = {(_key(k), int(k[4])) for k in probe_unreachable}
 
     def _gave_up(key, end: int) -> bool:
-        return (key, end) in punreach or (key, None) in punreach
+        return (key, end) in punreach
 
     d0_rv, dtd_rv = P.d0 / P.rv, P.d_td / P.rv
 
