@@ -112,8 +112,7 @@ def recheck(cx, positions: dict | None = None, rv: float | None = None,
     new_index = np.empty(len(eo), np.int64)
     new_index[eo] = np.arange(len(eo))
     z = np.zeros(len(eo), bool)
-    has_tri = np.zeros(len(eo), bool)
-    has_tri[_edges_of_triangles(e2[eo], t2[to])] = True
+    has_tri = np.diff(topo.edge_triangles[0]) > 0
     for k in cx.obstacle:
         # an obstacle edge with no triangle (a single-file chain walled on both sides) is
         # in no boundary: the certificate's target is the one-sided edges
@@ -124,22 +123,13 @@ def recheck(cx, positions: dict | None = None, rv: float | None = None,
     # the coordinator's own criterion: O is the target z_raw, closed (where fence edges
     # cross) only by edges of its one-hop closure zone
     cert = certify(topo, SimpleNamespace(z_raw=np.nonzero(z)[0]))
-    if cert is None or not cert.certified:
+    if not cert.certified:
         return Recheck(False, "the obstacle edges are not the boundary of any 2-chain of the "
                               "complex's triangles")
     return Recheck(True)
 
 
 SIDE_MARGIN = 0.05   # x rv: an apex nearer an edge's line than this is on neither side
-
-
-def _edges_of_triangles(edges: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """Indices (into sorted ``edges``) of every edge of a triangle."""
-    if not len(tris):
-        return np.zeros(0, np.int64)
-    key = {(int(a), int(b)): i for i, (a, b) in enumerate(edges.tolist())}
-    return np.array(sorted({key[(t[i], t[j])] for t in tris.tolist()
-                            for i, j in ((0, 1), (0, 2), (1, 2))}), np.int64)
 
 
 def _open_sides_left(el, tl, pts, fenced: set, margin: float) -> list[int]:
