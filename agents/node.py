@@ -361,5 +361,6 @@ def main(argv: list[str] | None = None) -> int:
     return run_node("swarmcover agent", __doc__, build_parser(), _serve, argv=argv,
                     logger=lambda a: f"swarmcover.agent.{a.id}", before_session=_check)
 
+
 if __name__ == "__main__":
     sys.exit(main())
