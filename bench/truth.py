@@ -360,10 +360,12 @@ class Feedback:
     when the project has it (its Evidence records every outcome), else the legacy
     ``test_drive_failures`` {vertex: [direction, ...]} of failed drives."""
 
-    def __init__(self):
+    def __init__(self, door_min_rv: float | None = None):
         try:
             from coordinator import evidence as ev  # noqa: F401
-            self._ev = ev.Evidence(robot_radius_rv=RADIUS / RV)
+            from coordinator.config import CoordinatorConfig
+            door = CoordinatorConfig().door_min_rv if door_min_rv is None else door_min_rv
+            self._ev = ev.Evidence(door_min_rv=door, robot_radius_rv=RADIUS / RV)
         except Exception:
             self._ev = None
         self.failures: dict[int, list[float]] = {}
@@ -390,16 +392,20 @@ class Feedback:
 
 # ---------------------------------------------------------------------------- one map
 def run_map(case: MapCase, *, per_cycle: int = 8, cap: int | None = None,
-            headings: str = "zero", cell: float = 0.02) -> dict:
-    """Grow one map to its end with the real fence rules and judge it."""
+            headings: str = "zero", cell: float = 0.02, door_min_rv: float | None = None,
+            topology: dict | None = None) -> dict:
+    """Grow one map to its end with the real fence rules and judge it. door_min_rv and
+    topology (TopologyParams fields) override the defaults, for experiments."""
+    import dataclasses
+
     from coordinator import build_complex, certify, detect_fence, plan_pushes, verify_certificate
     from coordinator.config import CoordinatorConfig
 
-    P = CoordinatorConfig().topology()
+    P = dataclasses.replace(CoordinatorConfig().topology(), **(topology or {}))
     rng = np.random.default_rng([case.seed, case.index, 7])
     sw = Swarm(case.pm, rng, case.noise_deg, headings)
     sw.add(np.array(case.source))
-    fb = Feedback()
+    fb = Feedback(door_min_rv)
     ras = Raster(case.pm, cell)
     free_area = float(ras.free.sum() * ras.cell_area)
     cap = cap or int(4.0 * free_area / RV ** 2) + 30
@@ -677,11 +683,21 @@ def main(argv=None) -> int:
                     help="robot body headings: zero (holonomic, parallel frames) or random")
     ap.add_argument("--only", type=int, nargs="*", help="run only these map indices")
     ap.add_argument("--out", help="write every map's result and the summary as JSON")
+    ap.add_argument("--door-min-rv", type=float, default=None,
+                    help="[coordinator] door_min_rv for the probes (default: the config's)")
+    ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                    help="override a coordinator.params.TopologyParams field, e.g. corner_probes=true")
     a = ap.parse_args(argv)
     if a.maps < 1 or a.jobs < 1:
         print("truth.py: --maps and --jobs must be >= 1", file=sys.stderr)
         return 2
-    kw = {"per_cycle": a.per_cycle, "headings": a.headings}
+    topo = {}
+    for item in a.set:
+        name, _, val = item.partition("=")
+        low = val.strip().lower()
+        topo[name.strip()] = (low == "true") if low in ("true", "false") else float(val)
+    kw = {"per_cycle": a.per_cycle, "headings": a.headings, "door_min_rv": a.door_min_rv,
+          "topology": topo}
     t0 = time.time()
     if a.only:
         rows = [run_index((a.seed, i, kw)) for i in a.only]
