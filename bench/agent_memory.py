@@ -13,9 +13,17 @@ Agents start as ``swarmcover run`` starts them: ``--run-config FILE`` (default
 configs/open_room.toml; ``--run-config ''`` starts them with ``--info-timeout 0`` instead).
 No world runs, so they hold with no task: the idle robot.
 
+For scale it measures two reference processes on the same router (``floor``): a bare
+interpreter that sleeps, and one that only imports zenoh and opens a client session. The
+agent's USS minus the session's is what the agent's own code and state hold.
+
 It also reports the import side, in fresh interpreters: how many modules ``import
-agents.node`` loads, its import time (``-X importtime``, the best of a few tries: the box is
-shared), and which heavy modules (numpy, scipy, pymunk, matplotlib, PIL) it pulls in.
+agents.node`` loads, which heavy libraries (numpy, scipy, pymunk, matplotlib, PIL) it pulls
+in (and which are mapped in the live agents, from /proc/<pid>/maps), and its import cost:
+``-X importtime`` wall time and the CPU time of ``python -c "import agents.node"`` minus
+that of ``python -c pass``, each the best of a few tries (the box is shared, the best is the
+least disturbed). Every child runs with a bytecode cache in a temporary directory
+(PYTHONPYCACHEPREFIX), as a deployed install has, even if PYTHONDONTWRITEBYTECODE is set.
 
     python bench/agent_memory.py [--n 1 20] [--settle-s 3]   (the venv's python, repo root)
 
@@ -28,9 +36,11 @@ import argparse
 import json
 import os
 import re
+import resource
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -68,23 +78,96 @@ def memory_mb(pid: int) -> dict[str, float]:
             "pss_anon": s.get("Pss_Anon", 0) / 1024, "pss_file": s.get("Pss_File", 0) / 1024}
 
 
+def heavy_mapped(pid: int) -> list[str]:
+    """Heavy packages with a file of their package directory mapped into ``pid``."""
+    with open(f"/proc/{pid}/maps") as f:
+        maps = f.read()
+    return [h for h in HEAVY if f"/{h}/" in maps]
+
+
+def _child_cpu_s(argv, env) -> float:
+    """CPU seconds (user + system) one child process used, run to completion."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    subprocess.run(argv, env=env, cwd=str(ROOT), timeout=60, check=True,
+                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
 def import_profile(py: str, env: dict, tries: int) -> dict:
-    """Modules ``import agents.node`` adds, and its best -X importtime total (ms)."""
+    """Modules ``import agents.node`` adds, and its import cost (best of ``tries``)."""
+    # fill the bytecode cache with what an agent started by `run` imports
+    subprocess.run([py, "-c", "import swarmcover.cli, agents.node, world.config"], env=env,
+                   cwd=str(ROOT), timeout=60, check=True)
     r = subprocess.run([py, "-c", _PROBE], capture_output=True, text=True, env=env,
                        cwd=str(ROOT), timeout=60, check=True)
     mods = [m for m in r.stdout.strip().split("\t") if m]
     tops = sorted({m.split(".")[0] for m in mods})
-    times = []
+    wall, cpu_imp, cpu_bare = [], [], []
     for _ in range(tries):
         r = subprocess.run([py, "-X", "importtime", "-c", "import agents.node"],
                            capture_output=True, text=True, env=env, cwd=str(ROOT),
                            timeout=60, check=True)
         last = [ln for ln in r.stderr.splitlines() if ln.rstrip().endswith("| agents.node")]
-        times.append(int(last[-1].split("|")[1]) / 1000.0)
+        wall.append(int(last[-1].split("|")[1]) / 1000.0)
+        cpu_imp.append(_child_cpu_s([py, "-c", "import agents.node"], env))
+        cpu_bare.append(_child_cpu_s([py, "-c", "pass"], env))
     return {"modules_added": len(mods), "top_level_packages": tops,
             "heavy_imported": [h for h in HEAVY if h in tops],
-            "import_ms_best": round(min(times), 1),
-            "import_ms_median": round(statistics.median(times), 1)}
+            "import_ms_best": round(min(wall), 1),
+            "import_ms_median": round(statistics.median(wall), 1),
+            "import_cpu_ms_best": round(1e3 * (min(cpu_imp) - min(cpu_bare)), 1)}
+
+
+_SESSION_ONLY = """
+import argparse, sys, time
+from bus.session import add_zenoh_args, open_session
+p = argparse.ArgumentParser()
+add_zenoh_args(p)
+s = open_session(p.parse_args(sys.argv[1:]))
+print("READY session", flush=True)
+time.sleep(600)
+"""
+
+
+def _stop(procs) -> None:
+    for p in reversed(procs):
+        if p.poll() is None:
+            p.send_signal(2)
+    for p in reversed(procs):
+        try:
+            p.wait(10)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+
+
+def floor(py: str, env: dict, settle_s: float) -> dict:
+    """USS/PSS of a sleeping bare interpreter and of one holding only a Zenoh session."""
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    procs: list[subprocess.Popen] = []
+
+    def start(argv):
+        p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                             stdin=subprocess.DEVNULL, text=True, env=env, cwd=str(ROOT))
+        procs.append(p)
+        return p
+
+    try:
+        router = start([py, "-m", "swarmcover", "router", "--listen", ep])
+        wait_line(router, "READY router")
+        bare = start([py, "-c", "print('READY bare', flush=True); import time; time.sleep(600)"])
+        sess = start([py, "-c", _SESSION_ONLY, "--connect", ep, "--swarm", f"floor{os.getpid()}"])
+        wait_line(bare, "READY bare")
+        wait_line(sess, "READY session")
+        time.sleep(settle_s)
+        out = {}
+        for name, p in (("bare_interpreter", bare), ("zenoh_session_only", sess)):
+            m = memory_mb(p.pid)
+            out[name] = {k: round(m[k], 2) for k in ("rss", "pss", "uss")}
+    finally:
+        _stop(procs)
+    return out
 
 
 def measure(n: int, py: str, env: dict, run_config: str, settle_s: float) -> dict:
@@ -111,17 +194,11 @@ def measure(n: int, py: str, env: dict, run_config: str, settle_s: float) -> dic
         time.sleep(settle_s)
         per = [memory_mb(a.pid) for a in agents]
         router_mb = memory_mb(router.pid)
+        heavy = sorted({h for a in agents for h in heavy_mapped(a.pid)})
+        threads = len(os.listdir(f"/proc/{agents[0].pid}/task"))
     finally:
-        for p in reversed(procs):
-            if p.poll() is None:
-                p.send_signal(2)
-        for p in reversed(procs):
-            try:
-                p.wait(10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-    res = {"agents": n}
+        _stop(procs)
+    res = {"agents": n, "heavy_mapped": heavy, "threads_per_agent": threads}
     for k in ("rss", "pss", "uss", "pss_anon", "pss_file"):
         res[f"{k}_mb_per_agent"] = round(statistics.mean(x[k] for x in per), 2)
     res["pss_mb_sum"] = round(sum(x["pss"] for x in per), 1)
@@ -140,23 +217,32 @@ def main(argv=None) -> int:
     ap.add_argument("--import-tries", type=int, default=5)
     args = ap.parse_args(argv)
     py = sys.executable
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
-    result: dict = {"bench": "agent_memory", "run_config": args.run_config or None}
-    result["imports"] = imp = import_profile(py, env, args.import_tries)
-    eprint(f"imports: {imp}")
-    rows = []
-    for n in args.n:
-        row = measure(n, py, env, args.run_config, args.settle_s)
-        eprint(f"N={n}: {row}")
-        rows.append(row)
+    with tempfile.TemporaryDirectory(prefix="agent_memory_pyc") as pyc:
+        env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONPYCACHEPREFIX=pyc)
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
+        result: dict = {"bench": "agent_memory", "run_config": args.run_config or None}
+        result["imports"] = imp = import_profile(py, env, args.import_tries)
+        eprint(f"imports: {imp}")
+        result["floor"] = fl = floor(py, env, args.settle_s)
+        eprint(f"floor: {fl}")
+        rows = []
+        for n in args.n:
+            row = measure(n, py, env, args.run_config, args.settle_s)
+            eprint(f"N={n}: {row}")
+            rows.append(row)
     result["memory"] = rows
+    first, last = rows[0], rows[-1]
+    result["agent_uss_over_session_uss"] = round(
+        first["uss_mb_per_agent"] / fl["zenoh_session_only"]["uss"], 3)
+    result["agent_own_uss_mb"] = round(
+        first["uss_mb_per_agent"] - fl["zenoh_session_only"]["uss"], 2)
     if len(rows) > 1:
-        a, b = rows[0], rows[-1]
-        result["pss_ratio_last_over_first"] = round(b["pss_mb_per_agent"]
-                                                    / a["pss_mb_per_agent"], 3)
-        # PSS = USS + shared/k: the shared part one agent maps, from the two runs
-        result["shared_mb_estimate"] = round(a["rss_mb_per_agent"] - a["uss_mb_per_agent"], 2)
+        result["pss_ratio_last_over_first"] = round(last["pss_mb_per_agent"]
+                                                    / first["pss_mb_per_agent"], 3)
+    # RSS - USS: the pages one agent shares (libpython, zenoh's .so, ...); PSS -> USS as N grows
+    result["shared_mb_per_agent"] = round(first["rss_mb_per_agent"]
+                                          - first["uss_mb_per_agent"], 2)
     print(json.dumps(result), flush=True)
     return 0
 
