@@ -23,7 +23,9 @@ in (and which are mapped in the live agents, from /proc/<pid>/maps), and its imp
 ``-X importtime`` wall time and the CPU time of ``python -c "import agents.node"`` minus
 that of ``python -c pass``, each the best of a few tries (the box is shared, the best is the
 least disturbed). Every child runs with a bytecode cache in a temporary directory
-(PYTHONPYCACHEPREFIX), as a deployed install has, even if PYTHONDONTWRITEBYTECODE is set.
+(PYTHONPYCACHEPREFIX), as a deployed install has, even if PYTHONDONTWRITEBYTECODE is set;
+``--no-pyc`` runs them with no cache at all (PYTHONDONTWRITEBYTECODE=1: every agent compiles
+the project's sources at start, as on a machine that sets it).
 
     python bench/agent_memory.py [--n 1 20] [--settle-s 3]   (the venv's python, repo root)
 
@@ -215,13 +217,21 @@ def main(argv=None) -> int:
     ap.add_argument("--run-config", default="configs/open_room.toml",
                     help="run config the agents read ('' for --info-timeout 0)")
     ap.add_argument("--import-tries", type=int, default=5)
+    ap.add_argument("--no-pyc", action="store_true",
+                    help="no bytecode cache for the children (PYTHONDONTWRITEBYTECODE=1)")
     args = ap.parse_args(argv)
     py = sys.executable
     with tempfile.TemporaryDirectory(prefix="agent_memory_pyc") as pyc:
-        env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONPYCACHEPREFIX=pyc)
-        env.pop("PYTHONDONTWRITEBYTECODE", None)
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        if args.no_pyc:
+            env["PYTHONDONTWRITEBYTECODE"] = "1"
+            env.pop("PYTHONPYCACHEPREFIX", None)
+        else:
+            env["PYTHONPYCACHEPREFIX"] = pyc
+            env.pop("PYTHONDONTWRITEBYTECODE", None)
         env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
-        result: dict = {"bench": "agent_memory", "run_config": args.run_config or None}
+        result: dict = {"bench": "agent_memory", "run_config": args.run_config or None,
+                        "bytecode_cache": not args.no_pyc}
         result["imports"] = imp = import_profile(py, env, args.import_tries)
         eprint(f"imports: {imp}")
         result["floor"] = fl = floor(py, env, args.settle_s)
