@@ -6,9 +6,14 @@ pays), then drives both in lockstep from this process with realistic Sense messa
 neighbours on a hexagon, one touch sector, bearings recomputed from a little kinematic model
 that applies the agent's commands). Phases: ``hold`` (station keeping) and ``goto``
 (homing), each first as a burst (CPU seconds per message, from /proc/<pid>/stat) and then
-at 20 Hz for a few seconds (share of one core, idle Zenoh threads included).
+at 20 Hz for a few seconds (share of one core, idle Zenoh threads included). Then, in this
+process, where an agent's own Python time per Sense goes (``split``): decoding the Sense
+(bus/messages.py: msgpack plus per-field checks), the behaviour's step, encoding the CmdVel,
+with the same messages and phases (CPU microseconds per message; the rest of the process's
+time per message is Zenoh's, as the echo shows). Memory per agent is bench/agent_memory.py.
 
-    python bench/agent.py [--burst 1500] [--rate-s 6]      (the venv's python, from the repo root)
+    python bench/agent.py [--burst 1500] [--rate-s 6] [--split-n 3000]
+                                                           (the venv's python, from the repo root)
 
 Progress goes to stderr; the last line on stdout is one JSON object.
 """
@@ -129,6 +134,44 @@ def drive(session, keys, mailbox, model, n, rate_hz, t0, tick0, goto_every=0):
     return tick, t
 
 
+def split(n: int) -> dict:
+    """CPU microseconds per message an agent spends decoding, stepping and encoding."""
+    from agents.behaviours import Behaviour
+    from agents.params import AgentParams
+    from bus.messages import CmdVel, Sense, Task, decode
+    clock = time.process_time
+    out = {}
+    for name, goto_every in (("hold", 0), ("goto", 60)):
+        model, beh = Model(), Behaviour(AgentParams(), 0)
+        beh.on_task(Task(task_id=1, robot=0, kind="hold"))
+        td = ts = te = 0.0
+        for k in range(n):
+            if goto_every and k % goto_every == 0:
+                model.x, model.y = 0.15 * math.cos(k), 0.15 * math.sin(k)
+                b = model.bearings_at(0.0, 0.0)
+                beh.on_task(Task(task_id=1000 + k, robot=0, kind="goto", landmarks=list(b),
+                                 bearings=list(b.values())))
+            raw = model.sense(0, k, 0.05 * k).encode()
+            t0 = clock()
+            sense = decode(raw, Sense)
+            t1 = clock()
+            cmd = beh.step(sense)
+            t2 = clock()
+            out_msg = CmdVel(robot=0, tick=k)
+            if cmd is not None:
+                out_msg.vx, out_msg.vy, out_msg.wz = cmd.vx, cmd.vy, cmd.wz
+            out_msg.encode()
+            t3 = clock()
+            td, ts, te = td + t1 - t0, ts + t2 - t1, te + t3 - t2
+            if cmd is not None:
+                model.apply(cmd, 0.05)
+        total = td + ts + te
+        out[name] = {"decode_us": round(1e6 * td / n, 1), "step_us": round(1e6 * ts / n, 1),
+                     "encode_us": round(1e6 * te / n, 1),
+                     "decode_share_of_python": round(td / total, 3)}
+    return out
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if "--echo" in argv:
@@ -136,6 +179,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--burst", type=int, default=1500, help="messages per burst phase")
     ap.add_argument("--rate-s", type=float, default=6.0, help="seconds per 20 Hz phase")
+    ap.add_argument("--split-n", type=int, default=3000,
+                    help="messages per phase of the in-process split (0: skip)")
     args = ap.parse_args(argv)
     from bus.keys import Keys
     from bus.messages import Task
@@ -216,6 +261,14 @@ def main(argv=None) -> int:
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()
+    if args.split_n > 0:
+        result["split"] = sp = split(args.split_n)
+        for name, ph in sp.items():
+            # against the agent process's whole CPU per message (Zenoh's threads included)
+            msg = result.get("phases", {}).get(name, {}).get("burst", {}).get("agent_ms_per_msg")
+            if msg:
+                ph["decode_share_of_process"] = round(1e-3 * ph["decode_us"] / msg, 3)
+        eprint(f"split: {sp}")
     print(json.dumps(result), flush=True)
     return 0
 

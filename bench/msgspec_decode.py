@@ -42,6 +42,7 @@ class Sense(msgspec.Struct, tag_field="_t", tag="Sense", forbid_unknown_fields=T
     back_bearings: list[Angle] = []
     touch: list[Angle] = []
     touch_robot: list[bool] = []
+    task_id: Annotated[int, msgspec.Meta(ge=-1, le=2**62)] = -1
 
 
 class Truth(msgspec.Struct, tag_field="_t", tag="Truth", forbid_unknown_fields=True):

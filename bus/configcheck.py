@@ -16,7 +16,8 @@ import dataclasses
 import math
 from typing import Any, Iterable, Mapping
 
-import numpy as np
+# numpy is imported inside the polygon check only (self_crossing and its helpers): agents
+# import this module for their [agent] section and must not pay for numpy (issue 18).
 
 
 class ConfigError(ValueError):
@@ -138,6 +139,7 @@ def self_crossing(pts, chunk: int = 256) -> tuple[int, int] | None:
     (touching counts), or None if the polygon is simple. Adjacent edges that fold back onto
     each other (collinear overlap) also count. Vectorised: edges sorted by their left end,
     each chunk compared only with the edges whose x-range can overlap it."""
+    import numpy as np
     p = np.asarray(pts, float).reshape(-1, 2)
     n = len(p)
     if n < 3:
@@ -170,6 +172,7 @@ def _cross(o, a, b):
 
 def _on_seg(p, q, r):
     """q on the bounding box of p-r (used once collinear)."""
+    import numpy as np
     return ((np.minimum(p[..., 0], r[..., 0]) <= q[..., 0]) &
             (q[..., 0] <= np.maximum(p[..., 0], r[..., 0])) &
             (np.minimum(p[..., 1], r[..., 1]) <= q[..., 1]) &
@@ -188,6 +191,7 @@ def _meet(p1, p2, q1, q2):
 
 def _collinear_overlap(p1, p2, q1, q2):
     """Collinear segments sharing more than one point."""
+    import numpy as np
     col = (_cross(p1, p2, q1) == 0) & (_cross(p1, p2, q2) == 0)
     d = p2 - p1
     L = np.maximum((d * d).sum(-1), 1e-300)

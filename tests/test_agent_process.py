@@ -1,6 +1,7 @@
 """The ``swarmcover agent`` process over a real Zenoh router, with this test as its world: it
 rejects malformed messages without crashing (and counts them), answers every Sense tick once
-(a re-sent tick is answered again without stepping), and reads its parameters. The runs
+(a re-sent tick is answered again without stepping), reads its parameters, and maps no
+heavy library (numpy, scipy, pymunk, matplotlib, PIL) while it runs. The runs
 against the real world process are in test_agent_world.py."""
 from __future__ import annotations
 
@@ -35,6 +36,20 @@ class Collector:
     def close(self):
         for s in self.subs:
             s.undeclare()
+
+
+HEAVY_LIBS = ("numpy", "scipy", "pymunk", "matplotlib", "PIL")
+
+
+def heavy_libraries_mapped(pid: int) -> set[str]:
+    """The heavy packages (numpy, scipy, pymunk, matplotlib, PIL) with a file of their
+    package directory mapped into process ``pid``: each has extension modules there, so
+    one imported anywhere in the process shows up."""
+    found = set()
+    with open(f"/proc/{pid}/maps") as f:
+        for line in f:
+            found.update(lib for lib in HEAVY_LIBS if f"/{lib}/" in line)
+    return found
 
 
 def start_agent(procs, zargs, rid, *extra):
@@ -79,6 +94,8 @@ def test_malformed_tasks_are_rejected_and_counted(procs, zargs, router):
         time.sleep(0.3)
         st = col.get(keys.status(3))[-1]
         assert st.task_id == 9 and st.task_state == "done" and st.state == "holding"
+        # an agent that decoded, stepped and answered holds no heavy library (issue 18)
+        assert heavy_libraries_mapped(agent.pid) == set()
         col.close()
     finally:
         s.close()
@@ -95,6 +112,7 @@ def test_agent_reads_run_config_and_rejects_unknown_agent_keys(procs, zargs, tmp
                     '[agent]\ng0 = 0.2\n')
     a = start_agent(procs, zargs, 1, "--run-config", good)
     a.wait_line("READY agent 1 kind=diffdrive", timeout=30)
+    assert heavy_libraries_mapped(a.pid) == set()      # the run-config path: no numpy
     a.signal(signal.SIGTERM)
     assert a.wait(15) == 0
     bad = tmp_path / "bad.toml"
