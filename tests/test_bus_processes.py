@@ -184,3 +184,26 @@ def test_query_world_info_skips_invalid_replies_and_honours_stop(router, caplog)
         done.set()
         ask.close()
         serve_s.close()
+
+
+def test_run_node_hands_what_prepare_built_to_serve(router):
+    """run_node's prepare: its value reaches serve as the fifth argument; a ValueError in it
+    is exit 2 before any session (here: no router at the given endpoint)."""
+    from bus.node import run_node
+    seen = []
+
+    def serve(args, session, keys, stop, prepared):
+        seen.append((prepared, keys.prefix))
+        return 3
+
+    argv = ["--connect", router, "--swarm", "prep", "--connect-timeout", "5"]
+    assert run_node("t", None, lambda p: None, serve, argv=argv,
+                    prepare=lambda a: {"swarm": a.swarm}) == 3
+    assert seen == [({"swarm": "prep"}, "sc/prep")]
+
+    def bad(args):
+        raise ValueError("--x 1: bad")
+    dead = f"tcp/127.0.0.1:{free_port()}"
+    assert run_node("t", None, lambda p: None, serve, argv=["--connect", dead],
+                    prepare=bad) == 2
+    assert len(seen) == 1
