@@ -82,3 +82,39 @@ def test_circular_mean_of_a_symmetric_pair_is_its_centre(c, half):
 def test_circular_mean_of_nothing_and_of_opposites():
     assert circular_mean([]) == (0.0, 0.0)
     assert circmean([]) is None and circmean([0.0, PI]) is None
+
+
+# plane geometry: closed rings -> wall segments, once (world/maps.py and hwbridge/room.py
+# each had their own)
+GEOMETRY_HOME = {"rings_to_segments": "ground/geometry.py", "rings_to_walls": None}
+
+
+def test_geometry_helpers_are_defined_once_in_the_ground_floor():
+    stray = [f"{p}:{line} defines {name}" for p, name, line in _defs()
+             if name in GEOMETRY_HOME and p != GEOMETRY_HOME[name]]
+    assert not stray, "a second copy of a ground-floor helper: " + "; ".join(stray)
+
+
+def test_rings_to_segments_of_a_square_a_repeated_vertex_and_nothing():
+    from ground.geometry import rings_to_segments
+    sq = [[0, 0], [1, 0], [1, 1], [0, 1]]
+    w = rings_to_segments([sq])
+    assert w.dtype == np.float64 and w.flags.c_contiguous
+    assert w.tolist() == [[0, 0, 1, 0], [1, 0, 1, 1], [1, 1, 0, 1], [0, 1, 0, 0]]
+    # a repeated vertex gives no zero-length wall; a lone point and an empty ring none at all
+    w2 = rings_to_segments([[[0, 0], [1, 0], [1, 0], [1, 1], [0, 1]], [[5, 5]], []])
+    assert w2.tolist() == w.tolist()
+    assert rings_to_segments([]).shape == (0, 4) and rings_to_segments([[[2, 3]]]).shape == (0, 4)
+    assert rings_to_segments([[[0, 0], [0, 0]]]).shape == (0, 4)
+
+
+coords = st.floats(-100, 100, allow_nan=False).map(lambda v: round(v, 1))
+
+
+@given(st.lists(st.lists(st.tuples(coords, coords), max_size=7), max_size=4))
+def test_rings_to_segments_is_every_nonzero_edge_in_ring_order(rings):
+    from ground.geometry import rings_to_segments
+    want = [[*r[k], *r[(k + 1) % len(r)]] for r in rings if len(r) >= 2 for k in range(len(r))
+            if r[k] != r[(k + 1) % len(r)]]
+    w = rings_to_segments(rings)
+    assert w.shape == (len(want), 4) and w.tolist() == want
