@@ -34,6 +34,7 @@ from bus.keys import Keys
 from bus.messages import CmdVel, Pose, Spawn, Truth, TwinCmd
 from bus.node import ready, run_node
 from bus.session import Mailbox, Receiver, add_zenoh_args, publisher, query_world_info
+from ground.geometry import flat_to_points
 
 from . import config as hwconfig
 from .frames import mocap_to_world
@@ -48,10 +49,6 @@ log = logging.getLogger("swarmcover.hwbridge")
 TELEPORT_COOLDOWN_S = 0.5     # no second teleport of one twin within this time
 TWIN_STALE_S = 1.0            # a twin pose older than this is not used
 FORMATION_EVERY_S = 0.5
-
-
-def flat_to_polygon(flat: list) -> tuple[tuple[float, float], ...]:
-    return tuple((flat[k], flat[k + 1]) for k in range(0, len(flat) - 1, 2))
 
 
 class Bridge:
@@ -358,7 +355,7 @@ def _serve(args, session, keys, stop) -> int:
                           "[map].boundary and world/info did not answer within %.0f s; "
                           "give a polygon or geofence = \"none\"", cfg.path, args.world_timeout)
                 return 2
-            fence = flat_to_polygon(info.boundary)
+            fence = flat_to_points(info.boundary)
         else:
             fence = cfg.fence_polygon()
         _check_fence_margin(cfg)

@@ -84,9 +84,10 @@ def test_circular_mean_of_nothing_and_of_opposites():
     assert circmean([]) is None and circmean([0.0, PI]) is None
 
 
-# plane geometry: closed rings -> wall segments, once (world/maps.py and hwbridge/room.py
-# each had their own)
-GEOMETRY_HOME = {"rings_to_segments": "ground/geometry.py", "rings_to_walls": None}
+# plane geometry: closed rings -> wall segments (world/maps.py and hwbridge/room.py each had
+# their own) and a WorldInfo's flat polygon -> points (hwbridge, fake-robot, scene, ros2)
+GEOMETRY_HOME = {"rings_to_segments": "ground/geometry.py", "rings_to_walls": None,
+                 "flat_to_points": "ground/geometry.py", "flat_to_polygon": None}
 
 
 def test_geometry_helpers_are_defined_once_in_the_ground_floor():
@@ -118,3 +119,10 @@ def test_rings_to_segments_is_every_nonzero_edge_in_ring_order(rings):
             if r[k] != r[(k + 1) % len(r)]]
     w = rings_to_segments(rings)
     assert w.shape == (len(want), 4) and w.tolist() == want
+
+
+def test_flat_to_points_pairs_floats_and_drops_an_odd_tail():
+    from ground.geometry import flat_to_points
+    assert flat_to_points([0, 1, 2.5, 3, 4]) == ((0.0, 1.0), (2.5, 3.0))
+    assert all(type(c) is float for p in flat_to_points([1, 2]) for c in p)
+    assert flat_to_points([]) == () and flat_to_points([7.0]) == ()
