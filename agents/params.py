@@ -14,8 +14,7 @@ from dataclasses import dataclass
 from typing import Any, Mapping
 
 from bus.configcheck import Checker, ConfigError
-
-ROBOT_KINDS = ("holonomic", "diffdrive")
+from bus.messages import ROBOT_KINDS  # the wire's list, re-exported for agents.node
 
 
 class ParamError(ConfigError):

@@ -16,16 +16,20 @@ supervisors and tests wait for.
 
     def main(argv=None) -> int:
         return run_node("swarmcover demo", __doc__, _args, _serve, argv=argv)
+
+A process that builds something from its flags before connecting (a checked config, a
+map) hands it to its loop through ``prepare``, not through attributes set on ``args``:
+
+    def _load(args) -> Loaded: ...            # ValueError -> exit 2, no session opened
+    def _serve(args, session, keys, stop, loaded: Loaded) -> int: ...
+    run_node("swarmcover world", __doc__, build_parser(), _serve, prepare=_load)
 """
 from __future__ import annotations
 
 import argparse
 import logging
-from typing import Callable
+from typing import Any, Callable
 
-import zenoh
-
-from .keys import Keys
 from .session import Shutdown, add_zenoh_args, keys_from_args, open_session, setup_logging
 
 __all__ = ["UsageError", "run_node", "ready"]
@@ -36,7 +40,8 @@ class UsageError(ValueError):
     message (which names the flag or field and its value)."""
 
 
-Serve = Callable[[argparse.Namespace, zenoh.Session, Keys, Shutdown], "int | None"]
+# serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown[, prepared]) -> exit code
+Serve = Callable[..., "int | None"]
 
 
 def run_node(prog: str, description: str | None,
@@ -45,19 +50,24 @@ def run_node(prog: str, description: str | None,
              logger: "str | Callable[[argparse.Namespace], str] | None" = None,
              mode: str = "client", session_mode: str | None = None,
              before_session: Callable[[argparse.Namespace], "int | None"] | None = None,
+             prepare: Callable[[argparse.Namespace], Any] | None = None,
              formatter_class=argparse.HelpFormatter, grace_s: float | None = None) -> int:
     """Parse flags, set up logging, open the session, run ``serve`` inside Shutdown.
 
     add_args(parser): the process's own flags (the Zenoh flags and --log-level are added);
       or a ready parser (its ``build_parser()``), completed with whichever of those it lacks.
     serve(args, session, keys, stop): the process's loop; its return value is the exit code
-      (None means 0). It must return soon after ``stop.is_set()``.
+      (None means 0). It must return soon after ``stop.is_set()``. With ``prepare`` it is
+      called as serve(args, session, keys, stop, prepared).
     logger: the logger's name, or a function of the parsed flags giving it.
     mode: the default Zenoh mode of the shared flags; session_mode: force a mode when
       opening (a router opens its session in router mode).
     before_session(args): checks that must fail before any connection (exit 2); when it
       returns an int, the process ends there with that code and opens no session (a
       command with nothing to do on the bus, e.g. an offline conversion).
+    prepare(args): runs after before_session, still before any connection (a ValueError
+      is exit 2); what it returns (a checked config, a map) is passed to serve as its fifth
+      argument, so nothing travels as attributes set on ``args``.
     grace_s: the Shutdown watchdog's grace (None: its default; 0: no watchdog, for a
       process that bounds its own exit, like a recorder that must not be cut mid-flush).
     """
@@ -82,13 +92,14 @@ def run_node(prog: str, description: str | None,
                 code = before_session(args)
                 if code is not None:
                     return int(code)
+            extra = (prepare(args),) if prepare is not None else ()
             keys = keys_from_args(args)
             session = open_session(args, session_mode)
         except (ValueError, ConnectionError) as e:
             log.error("%s", e)
             return 2
         try:
-            code = serve(args, session, keys, stop)
+            code = serve(args, session, keys, stop, *extra)
             return 0 if code is None else int(code)
         except (ValueError, SystemExit) as e:
             if isinstance(e, SystemExit) and (e.code is None or isinstance(e.code, int)):

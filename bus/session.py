@@ -28,7 +28,7 @@ import zenoh
 
 from .keys import Keys
 from .security import config_inserts, infer_role, secure_endpoints
-from .messages import Message, WireError, decode
+from .messages import Message, WireError, WorldInfo, decode
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 log = logging.getLogger("swarmcover.bus")
@@ -318,6 +318,40 @@ def wait_for(pred, timeout: float, interval: float = 0.02) -> bool:
             return True
         time.sleep(interval)
     return bool(pred())
+
+
+def query_world_info(session: zenoh.Session, keys: Keys, timeout: float, *,
+                     per_query: float = 2.0, stop: "Shutdown | None" = None,
+                     logger: logging.Logger | None = None) -> WorldInfo | None:
+    """The world's WorldInfo (its ``world/info`` queryable), asked again every 0.2 s until
+    one valid reply arrives or ``timeout`` seconds pass; None if no world answered.
+
+    Each query waits at most ``per_query`` seconds (never past the deadline, at least
+    0.1 s). An invalid reply is logged (warning) and skipped; a failed query (router not
+    reachable yet) is logged at debug level and retried. With ``stop``, a stop request
+    ends the wait early (None). ``logger``: the caller's logger (default swarmcover.bus).
+    """
+    lg = logger or log
+    end = time.monotonic() + timeout
+    while not (stop is not None and stop.is_set()):
+        left = end - time.monotonic()
+        if left <= 0:
+            break
+        try:
+            for reply in session.get(keys.world_info, timeout=max(0.1, min(per_query, left))):
+                if reply.ok is None:
+                    continue
+                try:
+                    return decode(reply.ok.payload.to_bytes(), WorldInfo)
+                except WireError as e:
+                    lg.warning("world/info reply invalid: %s", e)
+        except Exception as e:  # router not reachable yet, a closing session etc.
+            lg.debug("world/info query failed: %s", e)
+        if stop is not None:
+            stop.wait(0.2)
+        else:
+            time.sleep(0.2)
+    return None
 
 
 def keys_from_args(args: argparse.Namespace) -> Keys:

@@ -656,8 +656,7 @@ class Deployer:
         home = Step("home", td.robot, f)
         job.steps.append(home)
         lm, br = self._vertex_landmarks(f, exclude=set())   # f's neighbours: never td.robot
-        task = Task(kind="goto", vertex=f, landmarks=lm, bearings=br,
-                    ref_offsets=self._chained_offsets(f, lm), timeout_s=self.cfg.task_timeout_s)
+        task = self._goto(f, lm, br)
         log.info("cycle %d: free probe from vertex %d at %.2f of %s found room: back home",
                  self.cycle, f, spec.via_frac, spec.frontier_edge)
         self._start(home, task, now)
@@ -1024,6 +1023,11 @@ class Deployer:
             br.append(b)
         if len(lm) < 2:
             return None
+        return self._goto(v, lm, br)
+
+    def _goto(self, v: int, lm: list[int], br: list[float]) -> Task:
+        """The goto task to vertex v on the landmark robots ``lm`` at v's recorded bearings
+        ``br`` (their chained frame offsets, the configured timeout)."""
         return Task(kind="goto", vertex=v, landmarks=lm, bearings=br,
                     ref_offsets=self._chained_offsets(v, lm), timeout_s=self.cfg.task_timeout_s)
 
@@ -1061,9 +1065,7 @@ class Deployer:
                 br.append(b)
         if not lm:
             return None
-        refs = self._chained_offsets(target, lm)
-        task = Task(kind="goto", vertex=target, landmarks=lm, bearings=br, ref_offsets=refs,
-                    timeout_s=self.cfg.task_timeout_s)
+        task = self._goto(target, lm, br)
         # direction hint: the target vertex as seen from the mover's vertex; the agent
         # creeps along it while fewer than 2 landmarks are in view (spec 4.6)
         src = path[t] if t >= 0 else None

@@ -29,7 +29,7 @@ import zenoh
 from bus.keys import Keys
 from bus.messages import ROBOT_KINDS, Clock, Complex, CoordAck, Status, WorldInfo
 from bus.node import run_node
-from bus.session import Mailbox, Receiver, Shutdown, publisher
+from bus.session import Mailbox, Receiver, Shutdown, publisher, query_world_info
 from bus.trust import SignedPublisher, key_from_env
 
 from .config import CoordinatorConfig
@@ -161,23 +161,6 @@ def robot_kinds_from_config(cfg) -> callable:
     return lambda rid: (live[rid], True) if rid in live else (default, False)
 
 
-def query_world_info(session: zenoh.Session, keys: Keys, timeout: float) -> WorldInfo | None:
-    from bus.messages import WireError, decode
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        try:
-            for reply in session.get(keys.world_info, timeout=min(2.0, timeout)):
-                if reply.ok is not None:
-                    try:
-                        return decode(reply.ok.payload.to_bytes(), WorldInfo)
-                    except WireError as e:
-                        log.warning("world/info reply invalid: %s", e)
-        except Exception as e:  # router not reachable yet etc.
-            log.debug("world/info query failed: %s", e)
-        time.sleep(0.2)
-    return None
-
-
 def load_run_config(path: str | None, info: WorldInfo | None):
     """The run config: the world's resolved one if it answered, else the file."""
     from world.config import load_config, loads_config
@@ -206,7 +189,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
-    info = query_world_info(session, keys, args.world_timeout)
+    info = query_world_info(session, keys, args.world_timeout, logger=log)
     if info is None:
         log.warning("world/info did not answer within %.0f s; using %s", args.world_timeout,
                     args.run_config)

@@ -34,7 +34,8 @@ from dataclasses import dataclass
 
 from bus.messages import LiveCmd, MocapPose
 from bus.node import ready, run_node
-from bus.session import Mailbox, Receiver, add_zenoh_args, publisher
+from bus.session import Mailbox, Receiver, add_zenoh_args, publisher, query_world_info
+from ground.geometry import flat_to_points
 
 from .driver import CommandExpiry
 from .frames import Transform2D, world_to_mocap, wrap
@@ -220,15 +221,13 @@ def make_room(walls: str, run_config: str | None, session, keys) -> Room | None:
             return room
         except Exception as e:           # world's ConfigError/ValueError/OSError
             log.warning("walls: cannot build the map of %s (%s); asking the world", run_config, e)
-    from .node import query_world_info
-    info = query_world_info(session, keys, 5.0)
+    info = query_world_info(session, keys, 5.0, logger=log)
     if info is None or len(info.boundary) < 6:
         log.warning("walls: no map (no config map and no world/info answer): open floor, "
                     "the body can leave the map")
         return None
-    pts = [(info.boundary[k], info.boundary[k + 1]) for k in range(0, len(info.boundary) - 1, 2)]
-    obs = [[(o[k], o[k + 1]) for k in range(0, len(o) - 1, 2)] for o in info.obstacles]
-    room = Room.from_polygons(pts, obs, info.robot_radius or 0.06)
+    room = Room.from_polygons(flat_to_points(info.boundary),
+                              [flat_to_points(o) for o in info.obstacles], info.robot_radius or 0.06)
     log.info("walls: %d segments from world/info, body radius %.3f m", len(room), room.radius)
     return room
 
@@ -250,8 +249,7 @@ def _serve(args, session, keys, stop) -> int:
         if start is None and o["sources"]:
             start = o["sources"][min(o.get("source", 0), len(o["sources"]) - 1)]
         if start is None:
-            from .node import query_world_info
-            info = query_world_info(session, keys, 5.0)
+            info = query_world_info(session, keys, 5.0, logger=log)
             src = o.get("source", 0)
             if info is not None and len(info.sources) >= 3 * (src + 1):
                 start = tuple(info.sources[3 * src:3 * src + 3])

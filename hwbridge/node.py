@@ -31,9 +31,10 @@ import time
 from collections import deque
 
 from bus.keys import Keys
-from bus.messages import CmdVel, Pose, Spawn, Truth, TwinCmd, WorldInfo
+from bus.messages import CmdVel, Pose, Spawn, Truth, TwinCmd
 from bus.node import ready, run_node
-from bus.session import Mailbox, Receiver, add_zenoh_args, publisher
+from bus.session import Mailbox, Receiver, add_zenoh_args, publisher, query_world_info
+from ground.geometry import flat_to_points
 
 from . import config as hwconfig
 from .frames import mocap_to_world
@@ -48,28 +49,6 @@ log = logging.getLogger("swarmcover.hwbridge")
 TELEPORT_COOLDOWN_S = 0.5     # no second teleport of one twin within this time
 TWIN_STALE_S = 1.0            # a twin pose older than this is not used
 FORMATION_EVERY_S = 0.5
-
-
-def query_world_info(session, keys: Keys, timeout: float) -> WorldInfo | None:
-    """The world's WorldInfo, or None after ``timeout`` s."""
-    from bus.messages import WireError, decode
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        try:
-            for reply in session.get(keys.world_info, timeout=min(2.0, max(0.1, timeout))):
-                if reply.ok is not None:
-                    try:
-                        return decode(reply.ok.payload.to_bytes(), WorldInfo)
-                    except WireError as e:
-                        log.warning("world/info reply invalid: %s", e)
-        except Exception as e:
-            log.debug("world/info query failed: %s", e)
-        time.sleep(0.2)
-    return None
-
-
-def flat_to_polygon(flat: list) -> tuple[tuple[float, float], ...]:
-    return tuple((flat[k], flat[k + 1]) for k in range(0, len(flat) - 1, 2))
 
 
 class Bridge:
@@ -370,13 +349,13 @@ def _serve(args, session, keys, stop) -> int:
     try:
         fence = None
         if cfg.geofence == "map" and cfg.map_boundary is None:
-            info = query_world_info(session, keys, args.world_timeout)
+            info = query_world_info(session, keys, args.world_timeout, logger=log)
             if info is None or len(info.boundary) < 6:
                 log.error("%s: [hwbridge] geofence = \"map\" but the config has no "
                           "[map].boundary and world/info did not answer within %.0f s; "
                           "give a polygon or geofence = \"none\"", cfg.path, args.world_timeout)
                 return 2
-            fence = flat_to_polygon(info.boundary)
+            fence = flat_to_points(info.boundary)
         else:
             fence = cfg.fence_polygon()
         _check_fence_margin(cfg)

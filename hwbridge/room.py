@@ -12,27 +12,12 @@ Contacts are side-agnostic: a body that starts outside the map stays outside.
 from __future__ import annotations
 
 import math
-from typing import Iterable, Sequence
 
 import numpy as np
 
+from ground.geometry import rings_to_segments
+
 PUSH_ITERATIONS = 4      # corners need more than one push
-
-
-def rings_to_segments(rings: Iterable[Sequence[Sequence[float]]]) -> np.ndarray:
-    """Closed polygons [[x, y], ...] -> wall segments (E, 4) rows x0, y0, x1, y1."""
-    segs = []
-    for ring in rings:
-        pts = np.asarray(ring, float).reshape(-1, 2)
-        if len(pts) < 2:
-            continue
-        nxt = np.roll(pts, -1, axis=0)
-        segs.append(np.hstack([pts, nxt]))
-    if not segs:
-        return np.zeros((0, 4))
-    w = np.vstack(segs)
-    keep = np.hypot(w[:, 2] - w[:, 0], w[:, 3] - w[:, 1]) > 0
-    return w[keep]
 
 
 class Room:

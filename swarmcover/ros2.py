@@ -35,6 +35,7 @@ import threading
 from rosbags.typesys import Stores, get_typestore
 
 from bus import messages as m
+from ground.geometry import flat_to_points
 
 POSE_ARRAY = "geometry_msgs/msg/PoseArray"
 MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
@@ -169,7 +170,7 @@ def marker_array(info: m.WorldInfo | None, truth: m.Truth | None, cx: m.Complex 
     if info is not None:
         walls = []
         for flat in [info.boundary, *info.obstacles]:
-            ring = [(flat[k], flat[k + 1]) for k in range(0, len(flat) - 1, 2)]
+            ring = flat_to_points(flat)
             for a, b in zip(ring, ring[1:] + ring[:1]):
                 walls += [a, b]
         out.append(marker("walls", Marker.LINE_LIST, scale=(1.5 * lw, 0, 0), colour="wall",

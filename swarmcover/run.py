@@ -668,7 +668,7 @@ def _first_error(path: Path) -> str:
 
 def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Keys, out: Path,
                stop: Shutdown, state: RunState, t_wall0: float, live_limits: dict) -> None:
-    from coordinator.node import query_world_info
+    from bus.session import query_world_info
     from swarmcover.progress import Progress
     from swarmcover.recheck import recheck
     from world.groundtruth import coverage_fraction
@@ -690,7 +690,7 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
     coverage = 0.0
     pending_cert: tuple[Complex, float] | None = None   # waiting for the coordinator's token
     try:
-        state.info = query_world_info(session, keys, 5.0)
+        state.info = query_world_info(session, keys, 5.0, logger=log)
         if args.record:
             from swarmcover.record import Recorder
             recorder = Recorder(session, keys.all, str(out / "run.mcap"))

@@ -31,6 +31,7 @@ import foxglove.messages as fm
 from foxglove import Schema
 
 from bus import messages as m
+from ground.geometry import flat_to_points
 
 SCENE_TOPIC = "/swarmcover/scene"
 FRAME = "map"
@@ -69,13 +70,9 @@ def _pose(x: float = 0.0, y: float = 0.0, z: float = 0.0, yaw: float = 0.0) -> f
                    orientation=fm.Quaternion(z=math.sin(yaw / 2), w=math.cos(yaw / 2)))
 
 
-def _ring(flat) -> list[tuple[float, float]]:
-    return [(float(flat[k]), float(flat[k + 1])) for k in range(0, len(flat) - 1, 2)]
-
-
 def _ring_lines(flat, z: float) -> list[fm.Point3]:
     """Closed polygon as LINE_LIST points (a, b, b, c, ..., z, a)."""
-    pts = _ring(flat)
+    pts = flat_to_points(flat)
     out = []
     for a, b in zip(pts, pts[1:] + pts[:1]):
         out += [fm.Point3(x=a[0], y=a[1], z=z), fm.Point3(x=b[0], y=b[1], z=z)]

@@ -137,3 +137,73 @@ def test_a_process_stuck_after_sigint_is_ended_by_the_watchdog_with_its_stack(pr
     out = p.output()
     assert "still running 1 s after the stop request" in out
     assert "time.sleep(600)" in out  # where the main thread was stuck
+
+
+def test_query_world_info_skips_invalid_replies_and_honours_stop(router, caplog):
+    """bus.session.query_world_info: None without a world or after a stop request; with a
+    world, its first valid reply (an invalid reply is logged, skipped and asked again)."""
+    import threading
+    import uuid
+
+    from bus.keys import Keys
+    from bus.messages import WorldInfo
+    from bus.session import Shutdown, query_world_info
+    swarm = "wi" + uuid.uuid4().hex[:8]
+    k = Keys(swarm)
+    ask, serve_s = client_session(router, swarm), client_session(router, swarm)
+    done = threading.Event()
+    try:
+        assert query_world_info(ask, k, 0.5) is None            # no world yet
+        stopped = Shutdown(signals=())
+        stopped.set()
+        assert query_world_info(ask, k, 30.0, stop=stopped) is None
+
+        q = serve_s.declare_queryable(k.world_info)
+        info = WorldInfo(name="qwi", rv=1.0, robot_radius=0.06, dt=0.05).validate().encode()
+
+        answered = []
+
+        def serve():   # the first query gets garbage, the next ones the WorldInfo
+            while not done.is_set():
+                query = q.try_recv()
+                if query is None:
+                    time.sleep(0.01)
+                    continue
+                query.reply(k.world_info, info if answered else b"\xff\x00garbage")
+                answered.append(1)
+                query.drop()
+
+        th = threading.Thread(target=serve, daemon=True)
+        th.start()
+        caplog.set_level("WARNING", logger="swarmcover.bus")
+        got = query_world_info(ask, k, 20.0, per_query=1.0)
+        assert got is not None and got.name == "qwi" and got.dt == 0.05
+        assert len(answered) >= 2
+        assert any("world/info reply invalid" in r.getMessage() for r in caplog.records)
+    finally:
+        done.set()
+        ask.close()
+        serve_s.close()
+
+
+def test_run_node_hands_what_prepare_built_to_serve(router):
+    """run_node's prepare: its value reaches serve as the fifth argument; a ValueError in it
+    is exit 2 before any session (here: no router at the given endpoint)."""
+    from bus.node import run_node
+    seen = []
+
+    def serve(args, session, keys, stop, prepared):
+        seen.append((prepared, keys.prefix))
+        return 3
+
+    argv = ["--connect", router, "--swarm", "prep", "--connect-timeout", "5"]
+    assert run_node("t", None, lambda p: None, serve, argv=argv,
+                    prepare=lambda a: {"swarm": a.swarm}) == 3
+    assert seen == [({"swarm": "prep"}, "sc/prep")]
+
+    def bad(args):
+        raise ValueError("--x 1: bad")
+    dead = f"tcp/127.0.0.1:{free_port()}"
+    assert run_node("t", None, lambda p: None, serve, argv=["--connect", dead],
+                    prepare=bad) == 2
+    assert len(seen) == 1

@@ -82,3 +82,47 @@ def test_circular_mean_of_a_symmetric_pair_is_its_centre(c, half):
 def test_circular_mean_of_nothing_and_of_opposites():
     assert circular_mean([]) == (0.0, 0.0)
     assert circmean([]) is None and circmean([0.0, PI]) is None
+
+
+# plane geometry: closed rings -> wall segments (world/maps.py and hwbridge/room.py each had
+# their own) and a WorldInfo's flat polygon -> points (hwbridge, fake-robot, scene, ros2)
+GEOMETRY_HOME = {"rings_to_segments": "ground/geometry.py", "rings_to_walls": None,
+                 "flat_to_points": "ground/geometry.py", "flat_to_polygon": None}
+
+
+def test_geometry_helpers_are_defined_once_in_the_ground_floor():
+    stray = [f"{p}:{line} defines {name}" for p, name, line in _defs()
+             if name in GEOMETRY_HOME and p != GEOMETRY_HOME[name]]
+    assert not stray, "a second copy of a ground-floor helper: " + "; ".join(stray)
+
+
+def test_rings_to_segments_of_a_square_a_repeated_vertex_and_nothing():
+    from ground.geometry import rings_to_segments
+    sq = [[0, 0], [1, 0], [1, 1], [0, 1]]
+    w = rings_to_segments([sq])
+    assert w.dtype == np.float64 and w.flags.c_contiguous
+    assert w.tolist() == [[0, 0, 1, 0], [1, 0, 1, 1], [1, 1, 0, 1], [0, 1, 0, 0]]
+    # a repeated vertex gives no zero-length wall; a lone point and an empty ring none at all
+    w2 = rings_to_segments([[[0, 0], [1, 0], [1, 0], [1, 1], [0, 1]], [[5, 5]], []])
+    assert w2.tolist() == w.tolist()
+    assert rings_to_segments([]).shape == (0, 4) and rings_to_segments([[[2, 3]]]).shape == (0, 4)
+    assert rings_to_segments([[[0, 0], [0, 0]]]).shape == (0, 4)
+
+
+coords = st.floats(-100, 100, allow_nan=False).map(lambda v: round(v, 1))
+
+
+@given(st.lists(st.lists(st.tuples(coords, coords), max_size=7), max_size=4))
+def test_rings_to_segments_is_every_nonzero_edge_in_ring_order(rings):
+    from ground.geometry import rings_to_segments
+    want = [[*r[k], *r[(k + 1) % len(r)]] for r in rings if len(r) >= 2 for k in range(len(r))
+            if r[k] != r[(k + 1) % len(r)]]
+    w = rings_to_segments(rings)
+    assert w.shape == (len(want), 4) and w.tolist() == want
+
+
+def test_flat_to_points_pairs_floats_and_drops_an_odd_tail():
+    from ground.geometry import flat_to_points
+    assert flat_to_points([0, 1, 2.5, 3, 4]) == ((0.0, 1.0), (2.5, 3.0))
+    assert all(type(c) is float for p in flat_to_points([1, 2]) for c in p)
+    assert flat_to_points([]) == () and flat_to_points([7.0]) == ()

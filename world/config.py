@@ -24,8 +24,8 @@ from typing import Any
 
 # one style for every section (ConfigError is re-exported for the world's callers)
 from bus.configcheck import Checker, ConfigError
+from bus.messages import ROBOT_KINDS  # the wire's list, the one copy
 
-ROBOT_KINDS = ("holonomic", "diffdrive")
 MODES = ("lockstep", "realtime")
 WORLD_SECTIONS = ("map", "robots", "sensing", "world")
 # tables other components own and validate: [agent] (agents/params.py), [coordinator]

@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ground.geometry import rings_to_segments
+
 from .config import ConfigError, RunConfig, load_config
 
 # Size limits, checked before anything is allocated. Ground truth rasters the map at rv/20
@@ -83,16 +85,6 @@ def circle_polygon(center, radius: float, n: int = 32) -> np.ndarray:
     """An n-gon inscribed in a circle, (n, 2)."""
     a = np.arange(n) * (2 * math.pi / n)
     return np.stack([center[0] + radius * np.cos(a), center[1] + radius * np.sin(a)], 1)
-
-
-def rings_to_walls(rings) -> np.ndarray:
-    """Every edge of every closed ring as an (E, 4) array of x0, y0, x1, y1."""
-    segs = [np.concatenate([r, np.roll(r, -1, axis=0)], 1) for r in rings if len(r) >= 2]
-    if not segs:
-        return np.zeros((0, 4))
-    w = np.concatenate(segs, 0)
-    keep = (w[:, 0] != w[:, 2]) | (w[:, 1] != w[:, 3])
-    return np.ascontiguousarray(w[keep])
 
 
 def points_in_polygon(points, poly) -> np.ndarray:
@@ -273,7 +265,7 @@ class WorldMap:
         self.boundary = np.asarray(self.boundary, float).reshape(-1, 2)
         self.obstacles = [np.asarray(o, float).reshape(-1, 2) for o in self.obstacles]
         self.sources = np.asarray(self.sources, float).reshape(-1, 3)
-        self.walls = rings_to_walls([self.boundary] + self.obstacles)
+        self.walls = rings_to_segments([self.boundary] + self.obstacles)
         self._obb = np.array([[o[:, 0].min(), o[:, 1].min(), o[:, 0].max(), o[:, 1].max()]
                               for o in self.obstacles]).reshape(-1, 4)
 
@@ -382,8 +374,8 @@ def _disjoint(boundary: np.ndarray, obstacles: list) -> bool:
     if not points_in_polygon(allv, boundary).all():
         return False
     # no obstacle edge may cross a boundary edge
-    bw = rings_to_walls([boundary])
-    ow = rings_to_walls(obstacles)
+    bw = rings_to_segments([boundary])
+    ow = rings_to_segments(obstacles)
     if len(bw) * len(ow) > 4_000_000:
         return False
     hit = segments_intersect(ow[:, None, 0:2], ow[:, None, 2:4], bw[None, :, 0:2],

@@ -674,17 +674,17 @@ def _overrides(cfg: RunConfig, args) -> RunConfig:
     return replace(cfg, world=w)
 
 
-def _load(args) -> None:
-    """The run config and the map, checked before any connection (exit 2 naming the field)."""
+def _load(args) -> tuple[RunConfig, WorldMap]:
+    """The run config (with the map's sources) and the map, checked before any connection
+    (exit 2 naming the field); run_node hands them to :func:`_serve`."""
     cfg = _overrides(load_config(args.run_config), args)   # ConfigError is a ValueError
     wm = build_map(cfg)
-    args.world_cfg = with_sources(cfg, [tuple(s) for s in wm.sources])
-    args.world_map = wm
+    return with_sources(cfg, [tuple(s) for s in wm.sources]), wm
 
 
-def _serve(args, session, keys, stop) -> int:
+def _serve(args, session, keys, stop, loaded: tuple[RunConfig, WorldMap]) -> int:
     log = logging.getLogger("swarmcover.world")
-    cfg, wm = args.world_cfg, args.world_map
+    cfg, wm = loaded
     node = None
     rc = 0
     try:
@@ -711,4 +711,4 @@ def _serve(args, session, keys, stop) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     return run_node("swarmcover world", __doc__, build_parser(), _serve, argv=argv,
-                    logger="swarmcover.world", before_session=_load)
+                    logger="swarmcover.world", prepare=_load)

@@ -31,6 +31,8 @@ import pymunk
 import pymunk.batch as pb
 from scipy.spatial import cKDTree
 
+from bus.messages import ROBOT_KINDS
+
 from .maps import WorldMap
 
 TWO_PI = 2.0 * math.pi
@@ -140,8 +142,8 @@ class Physics:
         Holonomic robots get heading 0 whatever theta says."""
         if rid in self.robots:
             raise ValueError(f"robot {rid} already has a body")
-        if kind not in ("holonomic", "diffdrive"):
-            raise ValueError(f"robot kind {kind!r}: expected holonomic or diffdrive")
+        if kind not in ROBOT_KINDS:
+            raise ValueError(f"robot kind {kind!r}: expected {' or '.join(ROBOT_KINDS)}")
         if not exact:
             x, y = self.free_spot(x, y)
         theta = float(theta) if kind == "diffdrive" else 0.0
