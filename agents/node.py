@@ -27,9 +27,9 @@ import time
 from pathlib import Path
 
 from bus.keys import Keys
-from bus.messages import CmdVel, Pose, Sense, Status, Task, WireError, WorldInfo, decode
+from bus.messages import CmdVel, Pose, Sense, Status, Task
 from bus.node import ready, run_node
-from bus.session import Mailbox, Receiver, Shutdown, add_zenoh_args, publisher
+from bus.session import Mailbox, Receiver, Shutdown, add_zenoh_args, publisher, query_world_info
 
 from .behaviours import Behaviour
 from .params import ROBOT_KINDS, AgentParams, ParamError, from_toml_text, parse_override
@@ -60,28 +60,6 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def query_world_info(session, keys: Keys, timeout: float, stop: Shutdown,
-                     log: logging.Logger) -> WorldInfo | None:
-    """The world's WorldInfo, retried until ``timeout`` seconds pass; None if no world."""
-    end = time.monotonic() + timeout
-    while not stop.is_set():
-        left = end - time.monotonic()
-        if left <= 0:
-            return None
-        try:
-            for reply in session.get(keys.world_info, timeout=max(0.1, min(1.0, left))):
-                if reply.ok is None:
-                    continue
-                try:
-                    return decode(reply.ok.payload.to_bytes(), WorldInfo)
-                except WireError as e:
-                    log.warning("ignoring an invalid world/info reply: %s", e)
-        except Exception as e:  # a closed/unreachable session must not crash start-up
-            log.warning("world/info query failed: %s", e)
-        stop.wait(0.2)
-    return None
-
-
 def world_mode(args, session, keys: Keys, stop: Shutdown, log: logging.Logger) -> str | None:
     """The run's clock mode ("lockstep"/"realtime") from the run config or the world, None
     if unknown. Lockstep agents send no wall-clock heartbeats (they would make the
@@ -93,7 +71,7 @@ def world_mode(args, session, keys: Keys, stop: Shutdown, log: logging.Logger) -
             raw = tomllib.loads(Path(args.run_config).read_text())
             return str(raw.get("world", {}).get("mode", WorldConfig().mode))
         if args.info_timeout > 0:
-            info = query_world_info(session, keys, args.info_timeout, stop, log)
+            info = query_world_info(session, keys, args.info_timeout, per_query=1.0, stop=stop, logger=log)
             return info.mode if info is not None else None
     except Exception as e:  # the parameters' loader reports a bad config
         log.debug("clock mode unknown: %s", e)
@@ -113,7 +91,7 @@ def resolve_params(args, session, keys: Keys, stop: Shutdown,
         params = from_toml_text(text, str(path))
         log.info("parameters from %s", path)
     elif args.info_timeout > 0:
-        info = query_world_info(session, keys, args.info_timeout, stop, log)
+        info = query_world_info(session, keys, args.info_timeout, per_query=1.0, stop=stop, logger=log)
         if info is None:
             log.info("no world/info within %.1f s: default parameters", args.info_timeout)
         elif info.config:
