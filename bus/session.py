@@ -74,8 +74,8 @@ def add_zenoh_args(parser: argparse.ArgumentParser, mode: str = "client", *,
     add("--secure", metavar="DIR", default=os.environ.get("SWARMCOVER_SECURE") or None,
         help="security profile from `swarmcover secure init` (mutual TLS, password, "
              "ACL; env SWARMCOVER_SECURE); see docs/lab-network.md")
-    add("--role", default=None, help="identity role under --secure (default: from "
-        "the command; agents are agent-<--id>)")
+    add("--role", default=None, help="identity role under --secure (default: the "
+        "command's own, e.g. world; agent N is agent-N)")
     parser.set_defaults(_zenoh_mode=mode, _zenoh_role=infer_role(parser.prog))
 
 
