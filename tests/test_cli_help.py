@@ -111,3 +111,29 @@ def test_help_names_only_flags_that_exist(name):
 def test_the_option_reader_sees_fake_robots_flags():
     assert "--no-such-flag" not in _own("fake-robot")
     assert {"--run-config", "--id", "--cmd-timeout", "--connect"} <= _own("fake-robot")
+
+
+def _readme_cli_lines() -> list[tuple[str, str]]:
+    """(command, its arguments) of every `swarmcover CMD ...` in README.md: inline code and
+    lines of code blocks."""
+    text = (ROOT / "README.md").read_text()
+    blocks = re.findall(r"```\w*\n(.*?)```", text, re.S)
+    prose = re.sub(r"```\w*\n.*?```", "", text, flags=re.S)
+    spans = [" ".join(sp.split()) for sp in re.findall(r"`([^`]+)`", prose)]
+    spans += [ln for b in blocks for ln in b.splitlines() if ln.startswith("swarmcover ")]
+    return [(m.group(1), m.group(2).split("#")[0]) for sp in spans
+            for m in re.finditer(r"swarmcover ([a-z][a-z-]*)((?:\s+[^\s`]+)*)", sp)]
+
+
+def test_readme_cli_lines_name_real_commands_and_flags():
+    lines = _readme_cli_lines()
+    assert len(lines) >= 20 and any(c == "run" and "--record" in a for c, a in lines)
+    wrong = []
+    for cmd, rest in lines:
+        if cmd not in COMMANDS:
+            wrong.append(f"swarmcover {cmd}: no such command")
+            continue
+        missing = set(re.findall(r"(?<![\w-])--[a-z][\w-]*", rest)) - _own(cmd)
+        if missing:
+            wrong.append(f"swarmcover {cmd}{rest}: {sorted(missing)}")
+    assert not wrong, wrong
