@@ -7,8 +7,9 @@ a run folder (``summary.json``, ``final.png``, ``cycles.jsonl``, ``resolved.toml
 ``logs/``, and ``run.mcap`` with ``--record``). Exit status: 0 certified; 1 ran, not
 certified (wall timeout, robots_max, no progress); 2 a config or usage error (also one an
 agent or the coordinator reports at start); 3 a part failed (the world died, agents failed
-at start, an error); 130 interrupted. summary.json is written on every ending. Ctrl-C stops everything cleanly; a killed ``run`` takes its children with it
-(they watch their parent).
+at start, an error); 130 interrupted (Ctrl-C, SIGTERM, or SIGHUP when its terminal closes).
+summary.json is written on every ending. Ctrl-C stops everything cleanly; a killed ``run``
+takes its children with it (they watch their parent).
 
 CONFIG may be a TOML run config or a bare ROS map_server YAML (defaults are built around it).
 
@@ -169,6 +170,7 @@ EXIT_NOT_CERTIFIED, EXIT_USAGE, EXIT_FAILED, EXIT_INTERRUPTED = 1, 2, 3, 130
 STOP_REASONS = ("certified", "wall_timeout", "interrupted", "robots_max", "no_progress",
                 "world_died", "agents_failed", "error")
 FALSE_CERT_M2 = 0.005          # x rv^2: uncovered reachable area above this is a false certificate
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)   # each ends a run "interrupted"
 STOPPING_GATES = ("no_command", "command_stale", "no_mocap", "mocap_stale", "geofence")
 
 
@@ -602,7 +604,9 @@ def main(argv: list[str] | None = None) -> int:
     t_wall0 = time.monotonic()
     state = RunState(limits=limits)
     summary: dict = {}
-    with Shutdown(grace_s=0) as stop:  # a supervisor: stop_all bounds its own exit
+    # a supervisor: stop_all bounds its own exit. SIGHUP (the terminal or ssh session that
+    # ran it closed) ends it as Ctrl-C does, with its summary, instead of killing it bare
+    with Shutdown(signals=STOP_SIGNALS, grace_s=0) as stop:
         session = None
         try:
             if listen:
@@ -633,10 +637,14 @@ def main(argv: list[str] | None = None) -> int:
             log.exception("run failed")
             state.end("error", f"{type(e).__name__}: {e}", EXIT_FAILED)
         finally:
-            if stop.is_set() and stop.signum in (signal.SIGINT, signal.SIGTERM):
-                print("\nswarmcover run: interrupted, stopping every process ...",
-                      file=sys.stderr, flush=True)
-                state.end("interrupted", f"signal {stop.signum}", EXIT_INTERRUPTED)
+            if stop.is_set() and stop.signum in STOP_SIGNALS:
+                try:
+                    print("\nswarmcover run: interrupted, stopping every process ...",
+                          file=sys.stderr, flush=True)
+                except OSError:  # a hung-up terminal
+                    pass
+                state.end("interrupted", f"signal {signal.Signals(stop.signum).name}",
+                          EXIT_INTERRUPTED)
             if session is not None:
                 session.close()
             launcher.stop_all(order=["hwbridge", "coordinator", "world", "router"])
@@ -650,10 +658,13 @@ def main(argv: list[str] | None = None) -> int:
         warn = (f" -- WARNING: FALSE CERTIFICATE: ground truth shows "
                 f"{summary['uncovered_reachable_m2']:.2f} m^2 of reachable free area uncovered "
                 f"(at {summary.get('false_certificate_where')})")
-    print(f"swarmcover run: {'CERTIFIED' if state.certified else 'NOT certified'} "
-          f"({state.stop_reason}{': ' + state.detail if state.detail else ''}); "
-          f"coverage {100 * summary.get('coverage', 0.0):.1f}%{warn}; report in {out}/",
-          file=sys.stderr, flush=True)
+    try:
+        print(f"swarmcover run: {'CERTIFIED' if state.certified else 'NOT certified'} "
+              f"({state.stop_reason}{': ' + state.detail if state.detail else ''}); "
+              f"coverage {100 * summary.get('coverage', 0.0):.1f}%{warn}; report in {out}/",
+              file=sys.stderr, flush=True)
+    except OSError:  # a hung-up terminal: the report is in the run folder
+        pass
     return state.rc
 
 

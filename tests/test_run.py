@@ -50,16 +50,20 @@ def test_run_certifies_and_writes_the_report(procs, tmp_path):
 
 
 @pytest.mark.timeout(120)
-def test_ctrl_c_stops_every_process(procs, tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGHUP], ids=["ctrl-c", "hangup"])
+def test_ctrl_c_stops_every_process(procs, tmp_path, sig):
+    """Ctrl-C, and SIGHUP (the terminal that ran it closed; it used to kill run before it
+    wrote summary.json), stop every process and leave the report."""
     out = tmp_path / "run"
     p = _run(procs, out)
     wait_cycle(out, 2, 60)
     assert len(pids_with(str(out))) >= 4  # router, world, coordinator, agents
-    p.signal(signal.SIGINT)
+    p.signal(sig)
     assert p.wait(40) == 130
     # the report survives the interruption, with its reason, as strict JSON
     s = json.loads((out / "summary.json").read_text(), parse_constant=lambda c: 1 / 0)
     assert s["stop_reason"] == "interrupted" and s["certified"] is False and s["cycles"] >= 2
+    assert s["stop_detail"] == f"signal {signal.Signals(sig).name}"
     no_leftovers(out)
 
 
