@@ -16,6 +16,7 @@ import json
 import logging
 import os
 import queue
+import re
 import signal
 import sys
 import threading
@@ -34,37 +35,64 @@ DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 log = logging.getLogger("swarmcover.bus")
 
 
-def add_zenoh_args(parser: argparse.ArgumentParser, mode: str = "client") -> None:
-    """Add the standard connection flags to a command's parser."""
-    g = parser.add_argument_group("zenoh")
-    g.add_argument("--config", metavar="FILE", help="Zenoh JSON5 config file (applied first)")
-    g.add_argument("--mode", choices=("client", "peer", "router"), default=None,
-                   help=f"Zenoh mode (default: {mode})")
-    g.add_argument("--connect", "-e", action="append", default=None, metavar="ENDPOINT",
-                   help=f"endpoint to connect to, repeatable (default for clients: {DEFAULT_ROUTER})")
-    g.add_argument("--listen", "-l", action="append", default=None, metavar="ENDPOINT",
-                   help="endpoint to listen on, repeatable")
-    g.add_argument("--multicast-scouting", action="store_true",
-                   help="enable multicast scouting (off by default: explicit endpoints only)")
-    g.add_argument("--cfg", action="append", default=[], metavar="PATH:JSON5",
-                   help='raw config override, repeatable, e.g. --cfg "transport/link/tx/lease:2000"')
-    g.add_argument("--swarm", default=os.environ.get("SWARMCOVER_SWARM", "default"),
-                   help="experiment name scoping every key (env SWARMCOVER_SWARM; default 'default')")
-    g.add_argument("--connect-timeout", type=float, default=10.0, metavar="S",
-                   help="seconds to wait for the router at start (default 10)")
-    g.add_argument("--secure", metavar="DIR", default=os.environ.get("SWARMCOVER_SECURE") or None,
-                   help="security profile from `swarmcover secure init` (mutual TLS, password, "
-                        "ACL; env SWARMCOVER_SECURE); see docs/lab-network.md")
-    g.add_argument("--role", default=None, help="identity role under --secure (default: from "
-                   "the command; agents are agent-<--id>)")
+def add_zenoh_args(parser: argparse.ArgumentParser, mode: str = "client", *,
+                   helps: dict[str, str] | None = None, defaults: dict[str, Any] | None = None,
+                   title: str = "zenoh") -> None:
+    """Add the standard connection flags to a command's parser (the one place they are
+    defined: every command takes the same ones).
+
+    ``helps`` and ``defaults`` (keyed by the long flag, e.g. ``"--swarm"``) let a command say
+    what a flag means for it (``swarmcover run``: ``--listen`` is its embedded router's);
+    the flags and their destinations stay the same everywhere."""
+    helps, defaults = dict(helps or {}), dict(defaults or {})
+    unknown = (set(helps) | set(defaults)) - set(ZENOH_FLAGS)
+    if unknown:
+        raise ValueError(f"add_zenoh_args: no such shared flag {sorted(unknown)}")
+    g = parser.add_argument_group(title)
+
+    def add(flag: str, *more: str, **kw) -> None:
+        kw["help"] = helps.get(flag, kw.get("help"))
+        if flag in defaults:
+            kw["default"] = defaults[flag]
+        g.add_argument(flag, *more, **kw)
+
+    add("--config", metavar="FILE", help="Zenoh JSON5 config file (applied first)")
+    add("--mode", choices=("client", "peer", "router"), default=None,
+        help=f"Zenoh mode (default: {mode})")
+    add("--connect", "-e", action="append", default=None, metavar="ENDPOINT",
+        help=f"endpoint to connect to, repeatable (default for clients: {DEFAULT_ROUTER})")
+    add("--listen", "-l", action="append", default=None, metavar="ENDPOINT",
+        help="endpoint to listen on, repeatable")
+    add("--multicast-scouting", action="store_true",
+        help="enable multicast scouting (off by default: explicit endpoints only)")
+    add("--cfg", action="append", default=[], metavar="PATH:JSON5",
+        help='raw config override, repeatable, e.g. --cfg "transport/link/tx/lease:2000"')
+    add("--swarm", default=os.environ.get("SWARMCOVER_SWARM", "default"),
+        help="experiment name scoping every key (env SWARMCOVER_SWARM; default 'default')")
+    add("--connect-timeout", type=float, default=10.0, metavar="S",
+        help="seconds to wait for the router at start (default 10)")
+    add("--secure", metavar="DIR", default=os.environ.get("SWARMCOVER_SECURE") or None,
+        help="security profile from `swarmcover secure init` (mutual TLS, password, "
+             "ACL; env SWARMCOVER_SECURE); see docs/lab-network.md")
+    add("--role", default=None, help="identity role under --secure (default: the "
+        "command's own, e.g. world; agent N is agent-N)")
     parser.set_defaults(_zenoh_mode=mode, _zenoh_role=infer_role(parser.prog))
 
 
+# the shared flags, in the order add_zenoh_args adds them
+ZENOH_FLAGS = ("--config", "--mode", "--connect", "--listen", "--multicast-scouting", "--cfg",
+               "--swarm", "--connect-timeout", "--secure", "--role")
+
+
 def zenoh_argv(args: argparse.Namespace) -> list[str]:
-    """The connection flags of ``args`` as argv, to pass on to child processes."""
+    """The connection flags of ``args`` as argv, to pass on to child processes: all but
+    ``--listen`` (a child cannot listen where its parent does) and ``--role`` (each child
+    has its own identity)."""
     out: list[str] = []
     if args.config:
         out += ["--config", args.config]
+    if getattr(args, "mode", None):
+        out += ["--mode", args.mode]
     for e in args.connect or []:
         out += ["--connect", e]
     if args.multicast_scouting:
@@ -81,10 +109,12 @@ def make_config(args: argparse.Namespace, mode: str | None = None) -> zenoh.Conf
     """Build a zenoh.Config from the layered flags. Raises ValueError naming a bad flag."""
     mode = mode or args.mode or getattr(args, "_zenoh_mode", "client")
     if args.config:
+        if not os.path.isfile(args.config):
+            raise ValueError(f"--config {args.config}: no such file")
         try:
             conf = zenoh.Config.from_file(args.config)
         except Exception as e:
-            raise ValueError(f"--config {args.config}: {e}") from None
+            raise ValueError(f"--config {args.config}: {zenoh_error(e)}") from None
     else:
         conf = zenoh.Config()
     _insert(conf, "mode", json.dumps(mode), "--mode")
@@ -127,7 +157,13 @@ def _insert(conf: zenoh.Config, path: str, value: str, flag: str) -> None:
     try:
         conf.insert_json5(path, value)
     except Exception as e:
-        raise ValueError(f"{flag}: cannot set {path} = {value}: {e}") from None
+        raise ValueError(f"{flag}: cannot set {path} = {value}: {zenoh_error(e)}") from None
+
+
+def zenoh_error(e: BaseException) -> str:
+    """Zenoh's error text without the Rust source location it appends (`` at
+    <build folder>/src/lib.rs:1507.``): a path of the machine zenoh was built on."""
+    return re.sub(r"\s+at \S+\.rs:\d+\.?", "", str(e)).strip()
 
 
 def open_session(args: argparse.Namespace, mode: str | None = None) -> zenoh.Session:
@@ -143,7 +179,7 @@ def open_session(args: argparse.Namespace, mode: str | None = None) -> zenoh.Ses
         hint = "Is the port valid and free?" if args.listen else "Is `swarmcover router` running?"
         raise ConnectionError(
             f"cannot open a Zenoh session ({mode or args.mode or args._zenoh_mode} mode, "
-            f"{'; '.join(ends)}): {e}. {hint}") from None
+            f"{'; '.join(ends)}): {zenoh_error(e)}. {hint}") from None
 
 
 class Shutdown:

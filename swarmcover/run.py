@@ -7,10 +7,19 @@ a run folder (``summary.json``, ``final.png``, ``cycles.jsonl``, ``resolved.toml
 ``logs/``, and ``run.mcap`` with ``--record``). Exit status: 0 certified; 1 ran, not
 certified (wall timeout, robots_max, no progress); 2 a config or usage error (also one an
 agent or the coordinator reports at start); 3 a part failed (the world died, agents failed
-at start, an error); 130 interrupted. summary.json is written on every ending. Ctrl-C stops everything cleanly; a killed ``run`` takes its children with it
-(they watch their parent).
+at start, an error); 130 interrupted (Ctrl-C, SIGTERM, or SIGHUP when its terminal closes).
+summary.json is written on every ending. Ctrl-C stops everything cleanly; a killed ``run``
+takes its children with it (they watch their parent).
 
 CONFIG may be a TOML run config or a bare ROS map_server YAML (defaults are built around it).
+
+Zenoh: ``run`` takes the connection flags every command takes (group "zenoh" below). Its own
+session and every process it starts (world, coordinator, agents, hwbridge, stand-in robots,
+view) use them, connected to one router: the one ``run`` starts (on ``--port``, or on the
+``--listen`` endpoints, e.g. ``tcp/0.0.0.0:7447`` for other hosts to join), or an existing
+one (``--router ENDPOINT`` or ``--connect ENDPOINT``). Pairs that contradict each other
+(``--router``/``--connect`` with ``--listen``/``--port``, ``--connect`` with ``--router``,
+``--mode router``) are a usage error (exit 2).
 """
 from __future__ import annotations
 
@@ -33,7 +42,8 @@ import zenoh
 
 from bus.keys import Keys
 from bus.messages import Complex, Spawn, Truth, WorldInfo
-from bus.session import Receiver, Shutdown, add_zenoh_args, open_session, setup_logging
+from bus.session import (Receiver, Shutdown, add_zenoh_args, make_config, open_session,
+                         setup_logging, zenoh_argv)
 from bus.trust import KEY_ENV, new_key, sample_origin, verify
 
 log = logging.getLogger("swarmcover.run")
@@ -141,8 +151,8 @@ def resolve_config(path: str, args) -> tuple[object, str]:
     world = cfg.world
     if args.seed is not None:
         world = dataclasses.replace(world, seed=args.seed)
-    if args.mode is not None:
-        world = dataclasses.replace(world, mode=args.mode)
+    if args.clock is not None:
+        world = dataclasses.replace(world, mode=args.clock)
     sections = dict(cfg.sections)
     coord = dict(sections.get("coordinator", {}))
     if args.robots_max is not None:
@@ -160,6 +170,7 @@ EXIT_NOT_CERTIFIED, EXIT_USAGE, EXIT_FAILED, EXIT_INTERRUPTED = 1, 2, 3, 130
 STOP_REASONS = ("certified", "wall_timeout", "interrupted", "robots_max", "no_progress",
                 "world_died", "agents_failed", "error")
 FALSE_CERT_M2 = 0.005          # x rv^2: uncovered reachable area above this is a false certificate
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)   # each ends a run "interrupted"
 STOPPING_GATES = ("no_command", "command_stale", "no_mocap", "mocap_stale", "geofence")
 
 
@@ -311,17 +322,47 @@ def default_robots_max(cfg, wmap, resolved: str) -> tuple[object, str, dict]:
 
 # --------------------------------------------------------------------------- main
 
+RUN_ZENOH_HELP = {
+    "--config": "Zenoh JSON5 config file (applied first) for run's own session and every "
+                "process it starts (not the embedded router: start your own router with "
+                "`swarmcover router --config FILE` and give --router)",
+    "--mode": "Zenoh mode of run's own session and of the processes it starts: client "
+              "(default) or peer; they all reach each other through the router",
+    "--connect": "use the router at ENDPOINT (repeatable: fallbacks) instead of starting "
+                 "one; the same as --router, for run's own session and every process",
+    "--listen": "endpoint the embedded router listens on, repeatable (default "
+                "tcp/127.0.0.1:7447, or a free port if taken); the processes connect to it "
+                "(an unspecified host as 127.0.0.1), e.g. tcp/0.0.0.0:7447 so that other "
+                "hosts can join",
+    "--multicast-scouting": "enable multicast scouting in the embedded router, run's own "
+                            "session and every process (off by default)",
+    "--cfg": "raw config override for run's own session and every process it starts, "
+             'repeatable, e.g. --cfg "transport/link/tx/lease:2000"',
+    "--swarm": "experiment name scoping every key (env SWARMCOVER_SWARM; default: the "
+               "config's name)",
+    "--connect-timeout": "seconds run's own session and every process wait for the router "
+                         "at start (default 10)",
+    "--secure": "security profile from `swarmcover secure init` for the embedded router and "
+                "every process (mutual TLS, password, ACL; env SWARMCOVER_SECURE); see "
+                "docs/lab-network.md",
+    "--role": "identity role of run's own session under --secure (default viewer; each "
+              "process it starts has its own)",
+}
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="swarmcover run", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("config", help="run config (TOML) or a ROS map_server YAML")
+    # dest run_config: --config is the shared Zenoh config flag, as in every command
+    p.add_argument("run_config", metavar="CONFIG",
+                   help="run config (TOML) or a ROS map_server YAML")
     p.add_argument("--robots-max", type=int, default=None, help="stop if more robots would be needed")
-    mode = p.add_mutually_exclusive_group()
-    mode.add_argument("--lockstep", dest="mode", action="store_const", const="lockstep",
-                      help="deterministic lockstep clock (default from the config)")
-    mode.add_argument("--realtime", dest="mode", action="store_const", const="realtime",
-                      help="real-time clock")
-    p.set_defaults(mode=None)
+    clock = p.add_mutually_exclusive_group()
+    clock.add_argument("--lockstep", dest="clock", action="store_const", const="lockstep",
+                       help="deterministic lockstep clock (default from the config)")
+    clock.add_argument("--realtime", dest="clock", action="store_const", const="realtime",
+                       help="real-time clock")
+    p.set_defaults(clock=None)
     p.add_argument("--seed", type=int, default=None)
     p.add_argument("--out", default=None, help="run folder (default runs/<name>-<time>)")
     p.add_argument("--record", action="store_true", help="record every message to run.mcap")
@@ -335,16 +376,88 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--wall-timeout", type=float, default=3600.0,
                    help="give up after this many wall seconds (default 3600)")
     p.add_argument("--router", default=None, metavar="ENDPOINT",
-                   help="use this existing router instead of starting one")
+                   help="use this existing router instead of starting one (the same as "
+                        "one --connect)")
     p.add_argument("--port", type=int, default=None,
-                   help="port of the embedded router (default 7447, or a free one if taken)")
-    p.add_argument("--swarm", default=os.environ.get("SWARMCOVER_SWARM"),
-                   help="experiment name (default: the config's name)")
-    p.add_argument("--secure", metavar="DIR", default=None, help="lab-network security profile "
-                   "(swarmcover secure init) for every process; sets env SWARMCOVER_SECURE")
+                   help="port of the embedded router on 127.0.0.1 (default 7447, or a free one "
+                        "if taken); --listen gives whole endpoints")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.add_argument("--log-level", default="INFO")
+    add_zenoh_args(p, helps=RUN_ZENOH_HELP,
+                   defaults={"--swarm": os.environ.get("SWARMCOVER_SWARM") or None})
     return p
+
+
+# why two flags cannot go together: (flag, other flag) -> reason
+_CONFLICTS = {
+    ("--connect", "--router"): "both name the router to use",
+    ("--connect", "--port"): "--port places the router run starts; --connect uses one "
+                             "already running",
+    ("--listen", "--router"): "--listen places the router run starts; with --router it "
+                              "starts none",
+    ("--listen", "--connect"): "--listen places the router run starts; with --connect it "
+                               "starts none",
+    ("--listen", "--port"): "both place the router run starts; --port P is --listen "
+                            "tcp/127.0.0.1:P",
+}
+
+
+def check_zenoh_flags(args) -> None:
+    """The shared Zenoh flags as ``run`` reads them, before anything starts: one router
+    (``--router`` or ``--connect``, else the embedded one at ``--port``/``--listen``),
+    client or peer processes. Raises a ConfigError naming both flags of a conflicting pair."""
+    from bus.configcheck import Checker
+    from swarmcover.validate import CLI, _check_endpoint, _check_reachable, port_free
+    ck = Checker(CLI, "")
+    given = {"--router": args.router, "--connect": args.connect, "--listen": args.listen,
+             "--port": args.port}
+    for (a, b), why in _CONFLICTS.items():
+        if given[a] and given[b] is not None:
+            raise ck.err(a, given[a] if len(given[a]) > 1 else given[a][0],
+                         f"give either {a} or {b} (= {given[b]!r}), not both: {why}")
+    if args.mode == "router":
+        raise ck.err("--mode", args.mode, "run's own session and the processes it starts are "
+                                          "clients or peers of a router; run starts the router "
+                                          "itself (or give --router ENDPOINT)")
+    for e in args.connect or []:
+        _check_endpoint(ck, "--connect", e)
+    for e in args.listen or []:
+        _check_endpoint(ck, "--listen", e)
+        if e.startswith(("tcp/", "tls/")):
+            host, _, port = e.split("/", 1)[1].split("#", 1)[0].rpartition(":")
+            if not port_free(int(port), host.strip("[]")):
+                raise ck.err("--listen", e, f"cannot listen there: port {port} on {host} is "
+                                            f"in use (or not an address of this host)")
+    if args.connect:  # a router must answer at one of them now
+        errors = []
+        for e in args.connect:
+            try:
+                return _check_reachable(ck, "--connect", e)
+            except ValueError as err:
+                errors.append(err)
+        if len(errors) == 1:
+            raise errors[0]
+        raise ck.err("--connect", args.connect, "no router answers at any of them")
+
+
+def _local(endpoint: str) -> str:
+    """Where a process on this host connects to reach a listen endpoint: an unspecified
+    host (0.0.0.0, [::]) becomes loopback."""
+    proto, sep, rest = endpoint.partition("/")
+    addr, hsep, opts = rest.partition("#")
+    host, colon, port = addr.rpartition(":")
+    if not sep or not colon:
+        return endpoint
+    host = {"0.0.0.0": "127.0.0.1", "[::]": "[::1]", "": "127.0.0.1"}.get(host, host)
+    return f"{proto}/{host}:{port}{hsep}{opts}"
+
+
+def session_args(args, connect: list[str], swarm: str) -> argparse.Namespace:
+    """The shared flags of ``args`` for one of run's clients (its own session, a child):
+    connecting to the run's router, never listening where the router does."""
+    ns = argparse.Namespace(**vars(args))
+    ns.connect, ns.listen, ns.swarm = list(connect), None, swarm
+    return ns
 
 
 @dataclasses.dataclass
@@ -451,20 +564,33 @@ def main(argv: list[str] | None = None) -> int:
     # every flag and every section is checked before any process starts: exit 2, one line
     try:
         from swarmcover.validate import check_run, port_free, prepare_out
+        check_zenoh_flags(args)
         checked = check_run(args)
         cfg, resolved, wmap = checked.cfg, checked.resolved, checked.wmap
         live_limits, swarm = checked.live_limits, checked.swarm
         cfg, resolved, limits = default_robots_max(cfg, wmap, resolved)
+        if args.secure:  # children get it as a path that holds from any folder
+            args.secure = os.path.abspath(args.secure)
+        # one router: an existing one (--router, --connect), else the one run starts
+        if args.router or args.connect:
+            listen, connect = [], ([args.router] if args.router else list(args.connect))
+        else:
+            port = args.port if args.port is not None else (
+                7447 if port_free(7447) else _free_port())
+            listen = list(args.listen or [f"tcp/127.0.0.1:{port}"])
+            connect = [_local(e) for e in listen]
+        own = session_args(args, connect, swarm)
+        make_config(session_args(own, connect, swarm))  # a bad --config FILE or --cfg: exit 2
         out = prepare_out(Path(args.out or f"runs/{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"))
         from swarmcover.configref import complete_resolved_toml
         # every value the run uses, [agent] and [coordinator] defaults included (what the
         # processes read back is the same config: only defaults are written out)
-        (out / "resolved.toml").write_text(complete_resolved_toml(resolved, str(args.config)))
+        (out / "resolved.toml").write_text(complete_resolved_toml(resolved, str(args.run_config)))
     except (ValueError, OSError) as e:
         print(f"swarmcover run: {' '.join(str(e).split())}", file=sys.stderr)
         return 2
     except Exception as e:  # noqa: BLE001 -- a config we cannot use is still not a traceback
-        print(f"swarmcover run: {args.config}: cannot use this config: {type(e).__name__}: "
+        print(f"swarmcover run: {args.run_config}: cannot use this config: {type(e).__name__}: "
               f"{' '.join(str(e).split())}", file=sys.stderr)
         return 2
     setup_logging(args.log_level, "swarmcover.run")
@@ -473,27 +599,25 @@ def main(argv: list[str] | None = None) -> int:
     logdir = out / "logs"
     conf_path = str((out / "resolved.toml").resolve())
 
-    if args.router:
-        endpoint = args.router
-    else:
-        port = args.port if args.port is not None else (7447 if port_free(7447) else _free_port())
-        endpoint = f"tcp/127.0.0.1:{port}"
-    zargs = ["--connect", endpoint, "--swarm", swarm]
-    launcher = Launcher(logdir, zargs)
+    # every child gets run's shared Zenoh flags, connecting to the run's router
+    launcher = Launcher(logdir, zenoh_argv(own))
     t_wall0 = time.monotonic()
     state = RunState(limits=limits)
     summary: dict = {}
-    with Shutdown(grace_s=0) as stop:  # a supervisor: stop_all bounds its own exit
+    # a supervisor: stop_all bounds its own exit. SIGHUP (the terminal or ssh session that
+    # ran it closed) ends it as Ctrl-C does, with its summary, instead of killing it bare
+    with Shutdown(signals=STOP_SIGNALS, grace_s=0) as stop:
         session = None
         try:
-            if not args.router:
-                launcher.start("router", ["router", "--listen", endpoint], zenoh_args=False) \
-                    .wait_ready("READY router", 30)
-            print(f"swarmcover run: {cfg.name} -> {out}/  (router {endpoint}, swarm {swarm})",
+            if listen:
+                launcher.start("router", ["router", *_router_args(args, listen)],
+                               zenoh_args=False).wait_ready("READY router", 30)
+            print(f"swarmcover run: {cfg.name} -> {out}/  (router {', '.join(connect)}, "
+                  f"swarm {swarm})",
                   file=sys.stderr, flush=True)
             launcher.start("world", ["world", conf_path, "--await-coordinator", "120"]) \
                 .wait_ready("READY world", 60)
-            session = _open(endpoint, swarm)
+            session = open_session(own)
             _supervise(args, cfg, wmap, conf_path, launcher, session, Keys(swarm), out,
                        stop, state, t_wall0, live_limits)
         except RuntimeError as e:  # a part did not start
@@ -513,10 +637,14 @@ def main(argv: list[str] | None = None) -> int:
             log.exception("run failed")
             state.end("error", f"{type(e).__name__}: {e}", EXIT_FAILED)
         finally:
-            if stop.is_set() and stop.signum in (signal.SIGINT, signal.SIGTERM):
-                print("\nswarmcover run: interrupted, stopping every process ...",
-                      file=sys.stderr, flush=True)
-                state.end("interrupted", f"signal {stop.signum}", EXIT_INTERRUPTED)
+            if stop.is_set() and stop.signum in STOP_SIGNALS:
+                try:
+                    print("\nswarmcover run: interrupted, stopping every process ...",
+                          file=sys.stderr, flush=True)
+                except OSError:  # a hung-up terminal
+                    pass
+                state.end("interrupted", f"signal {signal.Signals(stop.signum).name}",
+                          EXIT_INTERRUPTED)
             if session is not None:
                 session.close()
             launcher.stop_all(order=["hwbridge", "coordinator", "world", "router"])
@@ -530,10 +658,13 @@ def main(argv: list[str] | None = None) -> int:
         warn = (f" -- WARNING: FALSE CERTIFICATE: ground truth shows "
                 f"{summary['uncovered_reachable_m2']:.2f} m^2 of reachable free area uncovered "
                 f"(at {summary.get('false_certificate_where')})")
-    print(f"swarmcover run: {'CERTIFIED' if state.certified else 'NOT certified'} "
-          f"({state.stop_reason}{': ' + state.detail if state.detail else ''}); "
-          f"coverage {100 * summary.get('coverage', 0.0):.1f}%{warn}; report in {out}/",
-          file=sys.stderr, flush=True)
+    try:
+        print(f"swarmcover run: {'CERTIFIED' if state.certified else 'NOT certified'} "
+              f"({state.stop_reason}{': ' + state.detail if state.detail else ''}); "
+              f"coverage {100 * summary.get('coverage', 0.0):.1f}%{warn}; report in {out}/",
+              file=sys.stderr, flush=True)
+    except OSError:  # a hung-up terminal: the report is in the run folder
+        pass
     return state.rc
 
 
@@ -548,7 +679,7 @@ def _write_report(args, cfg, wmap, out: Path, state: RunState, t_wall0: float) -
                  failures_healed=state.failures_healed, coordinator_restarts=state.restarts,
                  certificate_recheck=state.recheck,
                  refused_messages=dict(sorted(state.refused.items())),
-                 exit_code=state.rc, config=str(args.config), seed=cfg.world.seed,
+                 exit_code=state.rc, config=str(args.run_config), seed=cfg.world.seed,
                  mode=cfg.world.mode, **state.limits)
     try:
         rep = json.loads((out / "hwbridge.json").read_text())
@@ -568,10 +699,14 @@ def _write_report(args, cfg, wmap, out: Path, state: RunState, t_wall0: float) -
     return summary
 
 
-def _open(endpoint: str, swarm: str) -> zenoh.Session:
-    p = argparse.ArgumentParser()
-    add_zenoh_args(p)
-    return open_session(p.parse_args(["--connect", endpoint, "--swarm", swarm]))
+def _router_args(args, listen: list[str]) -> list[str]:
+    """The embedded router's flags: its listen endpoints and multicast scouting (its
+    --secure comes from the environment). --config and --cfg are for clients: a router of
+    one's own is ``swarmcover router --config FILE`` (or zenohd) and ``run --router``."""
+    out = [a for e in listen for a in ("--listen", e)]
+    if args.multicast_scouting:
+        out.append("--multicast-scouting")
+    return out
 
 
 def _agent_args(spawn: Spawn, conf_path: str, live_limits: dict) -> list[str]:

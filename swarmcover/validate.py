@@ -120,7 +120,7 @@ def check_run(args) -> Checked:
     (or another ValueError / OSError naming the file) before anything starts."""
     check_flags(args)
     from swarmcover.run import _live_limits, resolve_config
-    cfg, resolved = resolve_config(args.config, args)
+    cfg, resolved = resolve_config(args.run_config, args)
     path = cfg.path
     # cheapest first, so a bad value is reported before the heavy imports
     # [agent] (and the [robots]/[sensing]/[world] values agents read), as every agent will

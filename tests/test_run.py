@@ -50,16 +50,20 @@ def test_run_certifies_and_writes_the_report(procs, tmp_path):
 
 
 @pytest.mark.timeout(120)
-def test_ctrl_c_stops_every_process(procs, tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGHUP], ids=["ctrl-c", "hangup"])
+def test_ctrl_c_stops_every_process(procs, tmp_path, sig):
+    """Ctrl-C, and SIGHUP (the terminal that ran it closed; it used to kill run before it
+    wrote summary.json), stop every process and leave the report."""
     out = tmp_path / "run"
     p = _run(procs, out)
     wait_cycle(out, 2, 60)
     assert len(pids_with(str(out))) >= 4  # router, world, coordinator, agents
-    p.signal(signal.SIGINT)
+    p.signal(sig)
     assert p.wait(40) == 130
     # the report survives the interruption, with its reason, as strict JSON
     s = json.loads((out / "summary.json").read_text(), parse_constant=lambda c: 1 / 0)
     assert s["stop_reason"] == "interrupted" and s["certified"] is False and s["cycles"] >= 2
+    assert s["stop_detail"] == f"signal {signal.Signals(sig).name}"
     no_leftovers(out)
 
 
@@ -111,3 +115,109 @@ def test_live_agents_plan_with_the_bridge_limits_and_a_bad_bridge_stops_run_firs
     err = capsys.readouterr().err
     assert "v_max" in err and "-1" in err
     assert not (tmp_path / "run" / "logs").exists()
+
+
+# ---- the shared Zenoh flags (bus.session.add_zenoh_args), as `run` reads them
+
+def _closed_port() -> int:
+    return free_port()   # bound and released: nobody listens there
+
+
+CONFLICTS = [
+    # (flags, what the one line must name)
+    (["--connect", "tcp/127.0.0.1:{a}", "--router", "tcp/127.0.0.1:{b}"],
+     ["--connect = 'tcp/127.0.0.1:{a}'", "--router", "not both"]),
+    (["--connect", "tcp/127.0.0.1:{a}", "--port", "{b}"], ["--connect", "--port", "not both"]),
+    (["--listen", "tcp/127.0.0.1:{a}", "--port", "{b}"], ["--listen", "--port", "not both"]),
+    (["--listen", "tcp/127.0.0.1:{a}", "--router", "tcp/127.0.0.1:{b}"],
+     ["--listen", "--router", "not both"]),
+    (["--listen", "tcp/127.0.0.1:{a}", "--connect", "tcp/127.0.0.1:{b}"],
+     ["--listen", "--connect", "not both"]),
+    (["--mode", "router"], ["--mode = 'router'", "--router ENDPOINT"]),
+    (["--connect", "localhost"], ["--connect = 'localhost'", "expected a Zenoh endpoint"]),
+    (["--listen", "tcp/127.0.0.1:99999"], ["--listen = 'tcp/127.0.0.1:99999'"]),
+    (["--connect", "tcp/127.0.0.1:{a}"], ["--connect = 'tcp/127.0.0.1:{a}'", "no router answers"]),
+    (["--config", "{tmp}/no.json5"], ["--config {tmp}/no.json5", "no such file"]),
+    (["--config", "{tmp}/bad.json5"], ["--config {tmp}/bad.json5"]),
+    (["--cfg", "nocolon"], ["--cfg 'nocolon'", "PATH:JSON5"]),
+]
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("flags,needles", CONFLICTS, ids=[" ".join(f) for f, _ in CONFLICTS])
+def test_shared_flags_that_contradict_run_exit_2_naming_them(tmp_path, flags, needles):
+    import subprocess
+    import sys
+    (tmp_path / "bad.json5").write_text('{ mode: "client", oops')
+    subs = dict(a=_closed_port(), b=_closed_port(), tmp=tmp_path)
+    argv = [sys.executable, "-m", "swarmcover", "run", "configs/tiny.toml", "--quiet",
+            "--out", str(tmp_path / "run")] + [f.format(**subs) for f in flags]
+    p = subprocess.run(argv, capture_output=True, text=True, timeout=100,
+                       cwd=Path(__file__).resolve().parent.parent)
+    out = p.stdout + p.stderr
+    assert p.returncode == 2, out
+    assert "Traceback" not in out and len(out.strip().splitlines()) == 1, out
+    for n in needles:
+        assert n.format(**subs) in out, (n.format(**subs), out)
+    assert ".rs:" not in out  # zenoh's own source location is no part of a message
+    assert not (tmp_path / "run" / "logs").exists()  # nothing started
+
+
+def test_children_get_the_shared_flags_and_the_router_its_endpoints():
+    from bus.session import zenoh_argv
+    from swarmcover.run import _local, _router_args, build_parser, session_args
+    args = build_parser().parse_args([
+        "configs/tiny.toml", "--listen", "tcp/0.0.0.0:7999", "--cfg", "transport/link/tx/lease:9000",
+        "--connect-timeout", "20", "--multicast-scouting", "--mode", "peer", "--config", "z.json5",
+        "--role", "viewer"])
+    assert args.run_config == "configs/tiny.toml" and args.config == "z.json5"
+    assert args.swarm is None       # the config's name, decided by check_run
+    connect = [_local(e) for e in args.listen]
+    assert connect == ["tcp/127.0.0.1:7999"]
+    child = zenoh_argv(session_args(args, connect, "tiny"))
+    assert child == ["--config", "z.json5", "--mode", "peer", "--connect", "tcp/127.0.0.1:7999",
+                     "--multicast-scouting", "--cfg", "transport/link/tx/lease:9000",
+                     "--swarm", "tiny", "--connect-timeout", "20.0"]
+    assert "--listen" not in child and "--role" not in child   # the router's; run's own
+    assert _router_args(args, args.listen) == ["--listen", "tcp/0.0.0.0:7999",
+                                               "--multicast-scouting"]
+    own = session_args(args, connect, "tiny")
+    assert own.listen is None and own.connect == connect and own.role == "viewer"
+    assert args.listen == ["tcp/0.0.0.0:7999"]   # the copy leaves run's own flags alone
+    assert _local("tcp/[::]:7447") == "tcp/[::1]:7447"
+    assert _local("tls/10.0.0.2:7447#iface=eth0") == "tls/10.0.0.2:7447#iface=eth0"
+    # the clock flags no longer share a destination with the Zenoh --mode
+    a = build_parser().parse_args(["configs/tiny.toml", "--realtime", "--mode", "client"])
+    assert a.clock == "realtime" and a.mode == "client"
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_run_with_shared_flags_reaches_every_process(procs, tmp_path):
+    """A whole tiny run with the embedded router on --listen and --cfg/--swarm/
+    --connect-timeout: every process gets them, and the run certifies."""
+    out = tmp_path / "run"
+    port = free_port()
+    p = procs.swarmcover("run", "configs/tiny.toml", "--out", str(out), "--quiet",
+                         "--listen", f"tcp/0.0.0.0:{port}", "--swarm", "flags_run",
+                         "--cfg", "transport/link/tx/lease:12000", "--connect-timeout", "20")
+    wait_cycle(out, 2, 90)
+    cmdlines = []
+    for pid in pids_with(str(out)):
+        try:
+            cmdlines.append(Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0"))
+        except OSError:
+            pass
+    kids = [c for c in cmdlines if b"world" in c or b"coordinator" in c or b"agent" in c]
+    assert len(kids) >= 3, cmdlines
+    for c in kids:
+        text = b" ".join(c).decode()
+        for flag in (f"--connect tcp/127.0.0.1:{port}", "--swarm flags_run",
+                     "--cfg transport/link/tx/lease:12000", "--connect-timeout 20.0"):
+            assert flag in text, (flag, text)
+    assert p.wait(280) == 0, p.output()[-3000:]
+    assert f"READY router tcp/0.0.0.0:{port}" in (out / "logs" / "router.log").read_text()
+    assert f"(router tcp/127.0.0.1:{port}, swarm flags_run)" in p.output()
+    s = json.loads((out / "summary.json").read_text(), parse_constant=lambda c: 1 / 0)
+    assert s["certified"] and s["stop_reason"] == "certified"
+    no_leftovers(out)
