@@ -153,7 +153,7 @@ def make_deployer(sw: Swarm, heading: float, tdf, ev) -> Deployer:
     for i, r in rep.items():
         nb = r["neighbours"]
         st = Status(robot=i, seq=1, t=1.0, state="holding", vertex=i, task_state="done",
-                    nbr_ids=list(nb), nbr_bearings=list(nb.values()),
+                    nbr_ids=list(nb), nbr_bearings=[float(b) for b in nb.values()],
                     contact=bool(r["touch"]), contact_bearing=float(r["touch_bearing"] or 0.0))
         dep.on_status(st)
         dep.vertex_of[i] = i

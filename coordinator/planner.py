@@ -149,8 +149,8 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     cx, fence = _complex_and_fence(snap, params, test_drive_failures, evidence)
     cert = certify(cx, fence)
     ids = cx.ids
-    edges = [tuple(int(x) for x in ids[e]) for e in cx.edges]
-    tris = [tuple(int(x) for x in ids[t]) for t in cx.triangles]
+    edges = list(map(tuple, ids[cx.edges].tolist()))
+    tris = list(map(tuple, ids[cx.triangles].tolist()))
     plan = CyclePlan(edges=edges, triangles=tris, frontier=[int(e) for e in fence.frontier],
                      obstacle=[int(e) for e in fence.obstacle],
                      certified=bool(cert.certified) and fence.z.size > 0,
