@@ -27,16 +27,18 @@ Stages, each timed as the coordinator runs it in one cycle (coordinator/deployer
              its first execute step (the jobs' first tasks out)
 Each stage after the first runs on the outputs of the stage before (derived arrays of the
 complex computed once, as in a cycle). Times are medians of --repeat runs (perf_counter),
-in ms. Growth: the log-log slope of the time between consecutive N (1 = linear).
+in ms (--clock cpu: process time, for a loaded machine). Growth: the log-log slope of the time between consecutive N (1 = linear).
 
 Progress goes to stderr; the last stdout line is one JSON object.
-Usage: python bench/cycle.py [--n 100,250,500,1000,2000] [--repeat 5] [--profile N]
+Usage: python bench/cycle.py [--n 100,250,500,1000,2000] [--repeat 5] [--clock wall|cpu]
+                             [--kinds front,closed] [--profile N]
 """
 from __future__ import annotations
 
 import argparse
 import json
 import math
+import os
 import statistics
 import sys
 import time
@@ -94,8 +96,10 @@ def lattice_points(pm: PolyMap, rng) -> np.ndarray:
     return P[pm.wall_distance(P) >= MARGIN]
 
 
-def make_state(n: int, kind: str, seed: int = 1):
-    """(Swarm, source heading): ``kind`` 'front' or 'closed' (module docstring)."""
+def make_state(n: int, kind: str, seed: int = 1, centre: bool = False):
+    """(Swarm, source heading): ``kind`` 'front' or 'closed' (module docstring). The
+    source is the lattice point at the room's lower-left corner, or with ``centre`` the
+    one nearest the middle of the L's lower bar (a front all around it)."""
     rng = np.random.default_rng([seed, n, 0 if kind == "front" else 1])
     cell = SPACING * SPACING * math.sqrt(3) / 2
     area = n * cell * (1.6 if kind == "front" else 1.0)
@@ -105,7 +109,11 @@ def make_state(n: int, kind: str, seed: int = 1):
         if kind == "front" or abs(len(P) - n) <= 0.02 * n:
             break
         area *= n / max(len(P), 1)
-    src = P[np.argmin(P[:, 0] + P[:, 1])]          # the lower-left corner of the room
+    if centre:
+        hi = pm.outer.max(axis=0)
+        src = P[np.argmin(np.hypot(P[:, 0] - 0.5 * hi[0], P[:, 1] - 0.25 * hi[1]))]
+    else:
+        src = P[np.argmin(P[:, 0] + P[:, 1])]      # the lower-left corner of the room
     P = P[np.argsort(np.hypot(*(P - src).T), kind="stable")][:n]
     sw = Swarm(pm, rng, NOISE_DEG)
     wd = pm.wall_distance(P)
@@ -164,12 +172,15 @@ def make_deployer(sw: Swarm, heading: float, tdf, ev) -> Deployer:
 
 
 # ------------------------------------------------------------------------- timing
+CLOCK = time.perf_counter
+
+
 def median_ms(fn, repeat: int):
     ts, out = [], None
     for _ in range(repeat):
-        t = time.perf_counter()
+        t = CLOCK()
         out = fn()
-        ts.append(time.perf_counter() - t)
+        ts.append(CLOCK() - t)
     return 1e3 * statistics.median(ts), out
 
 
@@ -272,10 +283,15 @@ def main(argv=None) -> int:
     ap.add_argument("--n", default="100,250,500,1000,2000", help="comma-separated swarm sizes")
     ap.add_argument("--repeat", type=int, default=5, help="median of K runs per stage")
     ap.add_argument("--kinds", default="front,closed", help="states: front, closed")
+    ap.add_argument("--clock", choices=("wall", "cpu"), default="wall",
+                    help="wall: time.perf_counter (default); cpu: time.process_time, "
+                         "less disturbed by other processes on a loaded machine")
     ap.add_argument("--profile", type=int, default=0,
                     help="cProfile plan_cycle and Deployer._plan at this N instead (stderr)")
     a = ap.parse_args(argv)
     ns = [int(x) for x in a.n.split(",") if x]
+    global CLOCK
+    CLOCK = time.perf_counter if a.clock == "wall" else time.process_time
     kinds = [k for k in a.kinds.split(",") if k]
     if a.profile:
         import cProfile
@@ -310,7 +326,7 @@ def main(argv=None) -> int:
                 f"plan_cycle {row['plan_cycle']:.1f} ms ({time.perf_counter() - t:.1f} s)")
     for kind in kinds:
         table(rows, kind)
-    summary = {"rows": [{k: (round(v, 3) if isinstance(v, float) else v) for k, v in r.items()}
+    summary = {"clock": a.clock, "loadavg_1min": round(os.getloadavg()[0], 2), "rows": [{k: (round(v, 3) if isinstance(v, float) else v) for k, v in r.items()}
                         for r in rows]}
     at = [r for r in rows if r["n"] >= 900 and r["n"] <= 1100]
     if at:

@@ -1,0 +1,176 @@
+"""The coordinator's cycle made near-linear (issue 18, part 5) computes what it computed.
+
+bench/cycle.py times one deployment cycle against N; the optimisations it led to are
+checked here on seeded 300-robot states from the same builder (bench.cycle.make_state):
+  * shape.estimate_shape (a sparse bordered solve instead of normal equations made dense
+    by the scale-gauge row) against the straightforward dense normal equations;
+  * build_complex's fast path for plain dict reports against the as_report path;
+  * plan_cycle as a whole (complex, fence, certificate, redundancy, paths, lattice
+    placement) against its output frozen before the optimisations (commit 6df0bd2).
+No timing here: speed belongs in bench/cycle.py.
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.sparse import coo_matrix, identity
+from scipy.sparse.linalg import spsolve
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench.cycle import closing_evidence, make_state  # noqa: E402
+from coordinator.complex import RobotReport, build_complex  # noqa: E402
+from coordinator.config import CoordinatorConfig  # noqa: E402
+from coordinator.planner import Snapshot, plan_cycle  # noqa: E402
+from coordinator.shape import estimate_shape  # noqa: E402
+
+CFG = CoordinatorConfig()
+P = CFG.topology()
+
+
+@pytest.fixture(scope="module")
+def states():
+    out = {}
+    for kind in ("front", "closed"):
+        sw, h = make_state(300, kind, centre=(kind == "front"))
+        tdf, ev = closing_evidence(sw, P, h) if kind == "closed" else ({}, {})
+        # the reports once (each call draws new contact-bearing noise)
+        out[kind] = (sw, h, tdf, ev, sw.reports())
+    return out
+
+
+def snapshot(rep, h) -> Snapshot:
+    first = next(iter(rep[0]["neighbours"]))
+    return Snapshot(occupant={i: i for i in rep},
+                    nbrs={i: dict(r["neighbours"]) for i, r in rep.items()},
+                    contact={i: float(r["touch_bearing"]) for i, r in rep.items() if r["touch"]},
+                    kinds={i: "holonomic" for i in rep}, sources=[0], source_dirs=[h],
+                    known=[(0, first, 0.85)])
+
+
+def dense_shape(nbrs, headings, known, root, default_edge=0.85):
+    """estimate_shape as first written: normal equations A^T A (the scale-gauge row
+    included, which makes them dense) solved directly. Connected swarm assumed."""
+    order = sorted(nbrs)
+    col = {v: i for i, v in enumerate(order)}
+    rows, cols, vals, rhs, world = [], [], [], [], {}
+
+    def add(r, a, b, ux, uy):
+        ia, ib = col[a], col[b]
+        rows.extend((r, r, r, r))
+        cols.extend((2 * ib, 2 * ib + 1, 2 * ia, 2 * ia + 1))
+        vals.extend((ux, uy, -ux, -uy))
+
+    for a in order:
+        for b, th in nbrs[a].items():
+            if b in col and b != a:
+                beta = headings.get(a, 0.0) + th
+                world[(a, b)] = beta
+                add(len(rhs), a, b, -math.sin(beta), math.cos(beta))
+                rhs.append(0.0)
+    w = 10.0 * math.sqrt(len(world))
+    r = len(rhs)
+    for (a, b), beta in world.items():
+        add(r, a, b, math.cos(beta) * w / len(world), math.sin(beta) * w / len(world))
+    rhs.append(w)
+    for k in range(2):
+        rows.append(len(rhs))
+        cols.append(2 * col[root] + k)
+        vals.append(10.0)
+        rhs.append(0.0)
+    A = coo_matrix((vals, (rows, cols)), shape=(len(rhs), 2 * len(order))).tocsr()
+    M = (A.T @ A + 1e-9 * identity(2 * len(order), format="csr")).tocsc()
+    sol = spsolve(M, A.T @ np.asarray(rhs, float)).reshape(-1, 2)
+    ratios = [d / float(np.hypot(*(sol[col[b]] - sol[col[a]]))) for a, b, d in known
+              if (a, b) in world or (b, a) in world]
+    scale = float(np.median(ratios)) if ratios else default_edge
+    return {v: scale * sol[col[v]] for v in order}
+
+
+def test_estimate_shape_matches_the_dense_normal_equations(states):
+    sw, h, _, _, rep = states["front"]
+    snap = snapshot(rep, h)
+    rng = np.random.default_rng(3)
+    for heads in ({v: 0.0 for v in snap.nbrs},
+                  {v: float(rng.uniform(-0.2, 0.2)) for v in snap.nbrs}):
+        got = estimate_shape(snap.nbrs, heads, snap.known, root=0)
+        want = dense_shape(snap.nbrs, heads, snap.known, 0)
+        assert list(got) == list(want)
+        err = max(float(np.abs(got[v] - want[v]).max()) for v in want)
+        assert err < 1e-7, err
+    # and it is the swarm's shape: with one true length known, the true distances
+    pos = sw.points()
+    d_true = np.hypot(*(pos[1:] - pos[0]).T)
+    got = estimate_shape(snap.nbrs, {v: 0.0 for v in snap.nbrs},
+                         [(0, 1, float(d_true[0]))], root=0)
+    d_est = np.array([np.hypot(*got[v]) for v in range(1, sw.n)])
+    assert np.median(np.abs(d_est / d_true - 1.0)) < 0.03
+
+
+def test_build_complex_fast_path_equals_as_report_path(states):
+    sw, _, _, _, rep = states["closed"]
+    plain = {i: {"neighbours": {j: float(b) for j, b in r["neighbours"].items()},
+                 "touch": bool(r["touch"]),
+                 "touch_bearing": None if r["touch_bearing"] is None else float(r["touch_bearing"])}
+             for i, r in rep.items()}
+    slow = {i: RobotReport(dict(r["neighbours"]), r["touch"], r["touch_bearing"])
+            for i, r in plain.items()}
+    a, b = build_complex(plain), build_complex(slow)
+    assert a.n == sw.n > 250 and a.n_triangles > 400
+    for f in ("ids", "edges", "triangles", "bearings", "touch", "touch_bearing"):
+        assert np.array_equal(getattr(a, f), getattr(b, f), equal_nan=True), f
+    # a bad report still gets as_report's error
+    bad = dict(plain)
+    bad[5] = {"neighbours": {-1: 0.0}}
+    with pytest.raises(ValueError, match="negative"):
+        build_complex(bad)
+
+
+# plan_cycle's output on the two states, computed by the code before the optimisations
+FROZEN = {
+    "front": dict(
+        edges=796, triangles=495, frontier=107, obstacle=0, certified=True, redundant=[],
+        digest="a6e1bb4efe3c6f2f",
+        jobs=[([0, 2, 14, 23, 37], -1.429514, 0.75448, "edge", False, [54, 37]),
+              ([0, 4, 16, 31, 57], 3.138496, 0.521076, "edge", False, [44, 49, 72, 80, 57]),
+              ([0, 6, 18, 32, 55, 73], -1.567108, 0.497494, "probe", False, [73]),
+              ([0, 1, 15, 34, 53, 65], 2.618371, 0.558296, "edge", False, [42, 68, 65]),
+              ([0, 5, 9, 19, 46, 59], -1.613181, 0.880189, "edge", False, [85, 59]),
+              ([0, 3, 17, 28, 39, 67], -3.084927, 0.9, "edge", False, [72, 88, 67]),
+              ([102], -1.57957, 0.497494, "probe", True, [102]),
+              ([103], -1.553163, 0.497494, "probe", True, [103]),
+              ([106], 1.621908, 0.497494, "probe", True, [106]),
+              ([130], -1.576405, 0.497494, "probe", True, [130]),
+              ([137], -1.590192, 0.497494, "probe", True, [137])]),
+    "closed": dict(
+        edges=778, triangles=481, frontier=1, obstacle=109, certified=True, redundant=[],
+        digest="37536947b767b38b",
+        jobs=[([0, 1, 3, 7, 13, 20, 29, 43, 54, 68, 87, 104, 123, 149, 172, 197, 218, 226,
+                236, 246, 250], 1.04787, 0.9, "edge", False, [252, 250])]),
+}
+
+
+@pytest.mark.parametrize("kind", ["front", "closed"])
+def test_plan_cycle_output_unchanged(states, kind):
+    _, h, tdf, ev, rep = states[kind]
+    plan = plan_cycle(snapshot(rep, h), P, cycle=0, redundancy=True, test_drive_failures=tdf,
+                      previous_redundant=set(), protected=set(), max_paths=8,
+                      scale_correct=False, test_drive=True, next_vertex=300,
+                      lattice_spacing=CFG.d0, evidence=ev, free_probes=True)
+    want = FROZEN[kind]
+    got = dict(edges=len(plan.edges), triangles=len(plan.triangles),
+               frontier=len(plan.frontier), obstacle=len(plan.obstacle),
+               certified=plan.certified, redundant=sorted(plan.redundant),
+               digest=hashlib.sha1(repr((plan.edges, plan.triangles, plan.frontier,
+                                         plan.obstacle)).encode()).hexdigest()[:16])
+    assert got == {k: v for k, v in want.items() if k != "jobs"}
+    assert len(plan.jobs) == len(want["jobs"])
+    for j, (path, direction, dist, kind_, free, lms) in zip(plan.jobs, want["jobs"]):
+        assert (j.path, j.kind, j.free, j.deploy_landmarks) == (path, kind_, free, lms)
+        assert j.direction == pytest.approx(direction, abs=2e-6)
+        assert j.distance == pytest.approx(dist, abs=2e-6)
