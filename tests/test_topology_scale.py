@@ -174,3 +174,55 @@ def test_plan_cycle_output_unchanged(states, kind):
         assert (j.path, j.kind, j.free, j.deploy_landmarks) == (path, kind_, free, lms)
         assert j.direction == pytest.approx(direction, abs=2e-6)
         assert j.distance == pytest.approx(dist, abs=2e-6)
+
+
+def _redundancy_cases(states):
+    """(complex, fence, certificate): the closed 0.85-rv lattice (no 4-clique), and
+    bench/topology.py's lattice with holes at 0.61 rv spacing (some 4-cliques) and its
+    dense random swarm (all in 4-cliques, many redundant robots)."""
+    from bench.topology import dense_swarm, lattice_swarm, reports_from_points
+    from coordinator import certify, detect_fence
+
+    sw, h, tdf, ev, rep = states["closed"]
+    cx = build_complex(rep)
+    fence = detect_fence(cx, P, test_drive_failures=tdf, default_bearing=h, **ev)
+    yield cx, fence, certify(cx, fence)
+    rng = np.random.default_rng(5)
+    for pts, discs in (lattice_swarm(400, rng, spacing=0.61), (dense_swarm(300, rng), ())):
+        cx = build_complex(reports_from_points(pts, discs=discs))
+        fence = detect_fence(cx)
+        yield cx, fence, certify(cx, fence)
+
+
+def test_find_redundant_quick_rejection_changes_nothing(states, monkeypatch):
+    """find_redundant rejects robots whose link has a cycle and no triangle without the
+    link test; with that shortcut off (every robot taken for one in a 4-clique) it must
+    remove the same robots, run as many tests and reroute to the same chain."""
+    from coordinator import redundancy
+
+    removed_any = 0
+    for cx, fence, cert in _redundancy_cases(states):
+        assert cert.certified
+        fast = redundancy.find_redundant(cx, fence, cert, protected=[0])
+        with monkeypatch.context() as m:
+            m.setattr(redundancy, "_in_four_clique", lambda c: np.ones(c.n, dtype=bool))
+            slow = redundancy.find_redundant(cx, fence, cert, protected=[0])
+        assert fast.removed == slow.removed
+        assert fast.tried == slow.tried
+        assert np.array_equal(fast.certificate.chain, slow.certificate.chain)
+        removed_any += len(fast.removed)
+    assert removed_any > 100
+
+
+def test_four_cliques_found():
+    from bench.topology import dense_swarm, reports_from_points
+    from coordinator.redundancy import _in_four_clique
+
+    cx = build_complex(reports_from_points(dense_swarm(200, np.random.default_rng(2), degree=5)))
+    adj = cx.adjacency_sets()
+    want = np.zeros(cx.n, dtype=bool)
+    for a, b, c in cx.triangles.tolist():
+        for d in adj[a] & adj[b] & adj[c]:
+            want[[a, b, c, d]] = True
+    assert want.any() and not want.all()
+    assert np.array_equal(_in_four_clique(cx), want)
