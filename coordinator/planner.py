@@ -353,6 +353,8 @@ def _place_on_lattice(snap: Snapshot, jobs: list[JobSpec], spacing: float,
 
     if not snap.sources or any(k != "holonomic" for k in snap.kinds.values()):
         return
+    if all(job.kind == "probe" for job in jobs):
+        return          # probes are never moved onto the lattice: no shape estimate needed
     root = snap.sources[0]
     head = align_headings(snap.nbrs, snap.kinds, root=root)
     X = estimate_shape(snap.nbrs, head, snap.known, root=root, default_edge=spacing)

@@ -3,7 +3,8 @@
 bench/cycle.py times one deployment cycle against N; the optimisations it led to are
 checked here on seeded 300-robot states from the same builder (bench.cycle.make_state):
   * shape.estimate_shape (a sparse bordered solve instead of normal equations made dense
-    by the scale-gauge row) against the straightforward dense normal equations;
+    by the scale-gauge row, above _DENSE_MAX vertices) against the straightforward dense
+    normal equations (shape._estimate_shape_dense, the code as first written);
   * build_complex's fast path for plain dict reports against the as_report path;
   * plan_cycle as a whole (complex, fence, certificate, redundancy, paths, lattice
     placement) against its output frozen before the optimisations (commit 6df0bd2).
@@ -12,14 +13,11 @@ No timing here: speed belongs in bench/cycle.py.
 from __future__ import annotations
 
 import hashlib
-import math
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.sparse import coo_matrix, identity
-from scipy.sparse.linalg import spsolve
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -27,7 +25,7 @@ from bench.cycle import closing_evidence, make_state  # noqa: E402
 from coordinator.complex import RobotReport, build_complex  # noqa: E402
 from coordinator.config import CoordinatorConfig  # noqa: E402
 from coordinator.planner import Snapshot, plan_cycle  # noqa: E402
-from coordinator.shape import estimate_shape  # noqa: E402
+from coordinator.shape import _DENSE_MAX, _estimate_shape_dense, estimate_shape  # noqa: E402
 
 CFG = CoordinatorConfig()
 P = CFG.topology()
@@ -53,53 +51,15 @@ def snapshot(rep, h) -> Snapshot:
                     known=[(0, first, 0.85)])
 
 
-def dense_shape(nbrs, headings, known, root, default_edge=0.85):
-    """estimate_shape as first written: normal equations A^T A (the scale-gauge row
-    included, which makes them dense) solved directly. Connected swarm assumed."""
-    order = sorted(nbrs)
-    col = {v: i for i, v in enumerate(order)}
-    rows, cols, vals, rhs, world = [], [], [], [], {}
-
-    def add(r, a, b, ux, uy):
-        ia, ib = col[a], col[b]
-        rows.extend((r, r, r, r))
-        cols.extend((2 * ib, 2 * ib + 1, 2 * ia, 2 * ia + 1))
-        vals.extend((ux, uy, -ux, -uy))
-
-    for a in order:
-        for b, th in nbrs[a].items():
-            if b in col and b != a:
-                beta = headings.get(a, 0.0) + th
-                world[(a, b)] = beta
-                add(len(rhs), a, b, -math.sin(beta), math.cos(beta))
-                rhs.append(0.0)
-    w = 10.0 * math.sqrt(len(world))
-    r = len(rhs)
-    for (a, b), beta in world.items():
-        add(r, a, b, math.cos(beta) * w / len(world), math.sin(beta) * w / len(world))
-    rhs.append(w)
-    for k in range(2):
-        rows.append(len(rhs))
-        cols.append(2 * col[root] + k)
-        vals.append(10.0)
-        rhs.append(0.0)
-    A = coo_matrix((vals, (rows, cols)), shape=(len(rhs), 2 * len(order))).tocsr()
-    M = (A.T @ A + 1e-9 * identity(2 * len(order), format="csr")).tocsc()
-    sol = spsolve(M, A.T @ np.asarray(rhs, float)).reshape(-1, 2)
-    ratios = [d / float(np.hypot(*(sol[col[b]] - sol[col[a]]))) for a, b, d in known
-              if (a, b) in world or (b, a) in world]
-    scale = float(np.median(ratios)) if ratios else default_edge
-    return {v: scale * sol[col[v]] for v in order}
-
-
 def test_estimate_shape_matches_the_dense_normal_equations(states):
     sw, h, _, _, rep = states["front"]
     snap = snapshot(rep, h)
+    assert len(snap.nbrs) > _DENSE_MAX       # the sparse path
     rng = np.random.default_rng(3)
     for heads in ({v: 0.0 for v in snap.nbrs},
                   {v: float(rng.uniform(-0.2, 0.2)) for v in snap.nbrs}):
         got = estimate_shape(snap.nbrs, heads, snap.known, root=0)
-        want = dense_shape(snap.nbrs, heads, snap.known, 0)
+        want = _estimate_shape_dense(snap.nbrs, heads, snap.known, root=0)
         assert list(got) == list(want)
         err = max(float(np.abs(got[v] - want[v]).max()) for v in want)
         assert err < 1e-7, err
