@@ -21,7 +21,8 @@ Stages, each timed as the coordinator runs it in one cycle (coordinator/deployer
   certify    certify(cx, fence)
   redundancy find_redundant (closed state: plan_cycle runs it when certified)
   paths      plan_pushes from sources and redundant vertices (+ the extra source paths)
-  lattice    planner._place_on_lattice (align_headings, estimate_shape, lattice targets)
+  lattice    planner._place_on_lattice (align_headings, estimate_shape, lattice targets;
+             estimate_shape solves up to 200 vertices densely, larger swarms sparsely)
   plan_cycle the whole planner call
   cycle      Deployer.step in the settle phase (_plan: snapshot, plan_cycle, jobs), then
              its first execute step (the jobs' first tasks out)
