@@ -7,7 +7,10 @@ checked here on seeded 300-robot states from the same builder (bench.cycle.make_
     normal equations (shape._estimate_shape_dense, the code as first written);
   * build_complex's fast path for plain dict reports against the as_report path;
   * plan_cycle as a whole (complex, fence, certificate, redundancy, paths, lattice
-    placement) against its output frozen before the optimisations (commit 6df0bd2).
+    placement) against the same with the straightforward paths switched back in, and,
+    on a state without walls' evidence, against its output frozen before the
+    optimisations (commit 6df0bd2);
+  * find_redundant's quick rejection against the full link test.
 No timing here: speed belongs in bench/cycle.py.
 """
 from __future__ import annotations
@@ -91,49 +94,76 @@ def test_build_complex_fast_path_equals_as_report_path(states):
         build_complex(bad)
 
 
-# plan_cycle's output on the two states, computed by the code before the optimisations
-FROZEN = {
-    "front": dict(
-        edges=796, triangles=495, frontier=107, obstacle=0, certified=True, redundant=[],
-        digest="a6e1bb4efe3c6f2f",
-        jobs=[([0, 2, 14, 23, 37], -1.429514, 0.75448, "edge", False, [54, 37]),
-              ([0, 4, 16, 31, 57], 3.138496, 0.521076, "edge", False, [44, 49, 72, 80, 57]),
-              ([0, 6, 18, 32, 55, 73], -1.567108, 0.497494, "probe", False, [73]),
-              ([0, 1, 15, 34, 53, 65], 2.618371, 0.558296, "edge", False, [42, 68, 65]),
-              ([0, 5, 9, 19, 46, 59], -1.613181, 0.880189, "edge", False, [85, 59]),
-              ([0, 3, 17, 28, 39, 67], -3.084927, 0.9, "edge", False, [72, 88, 67]),
-              ([102], -1.57957, 0.497494, "probe", True, [102]),
-              ([103], -1.553163, 0.497494, "probe", True, [103]),
-              ([106], 1.621908, 0.497494, "probe", True, [106]),
-              ([130], -1.576405, 0.497494, "probe", True, [130]),
-              ([137], -1.590192, 0.497494, "probe", True, [137])]),
-    "closed": dict(
-        edges=778, triangles=481, frontier=1, obstacle=109, certified=True, redundant=[],
-        digest="37536947b767b38b",
-        jobs=[([0, 1, 3, 7, 13, 20, 29, 43, 54, 68, 87, 104, 123, 149, 172, 197, 218, 226,
-                236, 246, 250], 1.04787, 0.9, "edge", False, [252, 250])]),
-}
-
-
-@pytest.mark.parametrize("kind", ["front", "closed"])
-def test_plan_cycle_output_unchanged(states, kind):
-    _, h, tdf, ev, rep = states[kind]
-    plan = plan_cycle(snapshot(rep, h), P, cycle=0, redundancy=True, test_drive_failures=tdf,
+def _plan(snap, tdf, ev):
+    return plan_cycle(snap, P, cycle=0, redundancy=True, test_drive_failures=tdf,
                       previous_redundant=set(), protected=set(), max_paths=8,
                       scale_correct=False, test_drive=True, next_vertex=300,
                       lattice_spacing=CFG.d0, evidence=ev, free_probes=True)
-    want = FROZEN[kind]
-    got = dict(edges=len(plan.edges), triangles=len(plan.triangles),
-               frontier=len(plan.frontier), obstacle=len(plan.obstacle),
-               certified=plan.certified, redundant=sorted(plan.redundant),
-               digest=hashlib.sha1(repr((plan.edges, plan.triangles, plan.frontier,
-                                         plan.obstacle)).encode()).hexdigest()[:16])
-    assert got == {k: v for k, v in want.items() if k != "jobs"}
-    assert len(plan.jobs) == len(want["jobs"])
-    for j, (path, direction, dist, kind_, free, lms) in zip(plan.jobs, want["jobs"]):
-        assert (j.path, j.kind, j.free, j.deploy_landmarks) == (path, kind_, free, lms)
-        assert j.direction == pytest.approx(direction, abs=2e-6)
-        assert j.distance == pytest.approx(dist, abs=2e-6)
+
+
+def _summary(plan) -> dict:
+    return dict(edges=len(plan.edges), triangles=len(plan.triangles),
+                frontier=len(plan.frontier), obstacle=len(plan.obstacle),
+                certified=plan.certified, redundant=sorted(plan.redundant),
+                digest=hashlib.sha1(repr((plan.edges, plan.triangles, plan.frontier,
+                                          plan.obstacle)).encode()).hexdigest()[:16],
+                jobs=[(j.path, j.direction, j.distance, j.kind, j.free, j.deploy_landmarks)
+                      for j in plan.jobs])
+
+
+def _same_jobs(got, want):
+    assert len(got) == len(want)
+    for (path, d, dist, kind, free, lms), (path2, d2, dist2, kind2, free2, lms2) in zip(got, want):
+        assert (path, kind, free, lms) == (path2, kind2, free2, lms2)
+        assert d == pytest.approx(d2, abs=2e-6)
+        assert (dist is None) == (dist2 is None)
+        if dist is not None:
+            assert dist == pytest.approx(dist2, abs=2e-6)
+
+
+# plan_cycle's output on the front state without wall contacts (no probe, no evidence:
+# every job an edge deployment placed on the lattice), computed by the code before the
+# optimisations (commit 6df0bd2)
+FROZEN_BARE_FRONT = dict(
+    edges=796, triangles=495, frontier=107, obstacle=0, certified=True, redundant=[],
+    digest="a6e1bb4efe3c6f2f",
+    jobs=[([0, 2, 14, 23, 37], -1.429514, 0.75448, "edge", False, [54, 37]),
+          ([0, 4, 16, 31, 57], 3.138496, 0.521076, "edge", False, [44, 49, 72, 80, 57]),
+          ([0, 1, 15, 34, 53, 65], 2.618371, 0.558296, "edge", False, [42, 68, 65]),
+          ([0, 6, 18, 32, 55, 73], -0.031994, 0.621886, "edge", False, [50, 73]),
+          ([0, 5, 9, 19, 46, 59], -1.613181, 0.880189, "edge", False, [85, 59]),
+          ([0, 3, 17, 28, 39, 67], -3.084927, 0.9, "edge", False, [72, 88, 67])])
+
+
+def test_plan_cycle_output_unchanged(states):
+    _, h, _, _, rep = states["front"]
+    snap = snapshot(rep, h)
+    snap.contact.clear()
+    got = _summary(_plan(snap, {}, {}))
+    assert {k: v for k, v in got.items() if k != "jobs"} == \
+        {k: v for k, v in FROZEN_BARE_FRONT.items() if k != "jobs"}
+    _same_jobs(got["jobs"], FROZEN_BARE_FRONT["jobs"])
+
+
+@pytest.mark.parametrize("kind", ["front", "closed"])
+def test_plan_cycle_equals_the_straightforward_computation(states, kind, monkeypatch):
+    """The whole cycle on the current fence rules (probes, evidence), optimised against
+    the straightforward paths: dense shape estimate, every report through as_report, no
+    quick rejection in the redundancy pass."""
+    from coordinator import complex as cmod
+    from coordinator import redundancy, shape
+
+    _, h, tdf, ev, rep = states[kind]
+    fast = _summary(_plan(snapshot(rep, h), tdf, ev))
+    with monkeypatch.context() as m:
+        m.setattr(shape, "estimate_shape", _estimate_shape_dense)
+        m.setattr(cmod, "_plain_report", lambda r: None)
+        m.setattr(redundancy, "_in_four_clique", lambda c: np.ones(c.n, dtype=bool))
+        slow = _summary(_plan(snapshot(rep, h), tdf, ev))
+    assert {k: v for k, v in fast.items() if k != "jobs"} == \
+        {k: v for k, v in slow.items() if k != "jobs"}
+    assert fast["jobs"], "no push planned: the test shows nothing"
+    _same_jobs(fast["jobs"], slow["jobs"])
 
 
 def _redundancy_cases(states):
