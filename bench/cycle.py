@@ -26,6 +26,8 @@ Stages, each timed as the coordinator runs it in one cycle (coordinator/deployer
   plan_cycle the whole planner call
   cycle      Deployer.step in the settle phase (_plan: snapshot, plan_cycle, jobs), then
              its first execute step (the jobs' first tasks out)
+  replan     planner.replan_push for the cycle's first push, as the deployer re-plans a
+             push whose test drive touched, within the cycle (not part of "cycle")
 Each stage after the first runs on the outputs of the stage before (derived arrays of the
 complex computed once, as in a cycle). Times are medians of --repeat runs (perf_counter),
 in ms (--clock cpu: process time, for a loaded machine). Growth: the log-log slope of the time between consecutive N (1 = linear).
@@ -57,14 +59,20 @@ from bus.messages import Status  # noqa: E402
 from coordinator import build_complex, certify, detect_fence, find_redundant, plan_pushes  # noqa: E402
 from coordinator.config import CoordinatorConfig  # noqa: E402
 from coordinator.deployer import Deployer  # noqa: E402
-from coordinator.planner import _claimed, _place_on_lattice, _reports, plan_cycle  # noqa: E402
+from coordinator.planner import (  # noqa: E402
+    _claimed,
+    _place_on_lattice,
+    _reports,
+    plan_cycle,
+    replan_push,
+)
 
 SPACING = 0.85 * RV
 TOUCH_GAP = 0.3
 MARGIN = 0.12            # lattice points at least this far from every wall
 NOISE_DEG = 0.5
 STAGES = ("snapshot", "complex", "fence", "certify", "redundancy", "paths", "lattice",
-          "plan_cycle", "cycle")
+          "plan_cycle", "cycle", "replan")
 
 
 def log(*a):
@@ -240,6 +248,17 @@ def time_state(sw: Swarm, heading: float, kind: str, repeat: int) -> dict:
     else:
         row["lattice"] = 0.0
     row["plan_cycle"], plan = median_ms(lambda: plan_cycle(snap, P, **kw), repeat)
+    pushes = [j for j in plan.jobs if not j.free]
+    if pushes:
+        # a push whose test drive touched is re-planned within the cycle (the deployer's
+        # _replan): the complex, fence, paths and lattice placement again
+        job = pushes[0]
+        row["replan"], _ = median_ms(lambda: replan_push(
+            snap, P, start=job.path[0], busy=[j for j in plan.jobs if j is not job],
+            exclude=set(), test_drive_failures=tdf, new_vertex=sw.n + 100, scale_correct=False,
+            test_drive=True, lattice_spacing=cfg.d0, evidence=ev), repeat)
+    else:
+        row["replan"] = 0.0
 
     def cycle():
         # settle -> plan (Deployer._plan), then the execute phase's first step sends the
