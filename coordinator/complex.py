@@ -341,6 +341,27 @@ def _edges_from_directed(n: int, src: np.ndarray, dst: np.ndarray, brg: np.ndarr
     return edges, bearings  # sorted by key since dkey sorted and u < v
 
 
+def _plain_report(r: Any):
+    """(neighbours, touch, touch_bearing) of a report that needs no conversion -- a dict
+    whose "neighbours" dict maps plain non-negative ints to floats (or numpy float64s:
+    they go into a float64 array as they are), a bool "touch" (or
+    none) and a float or None "touch_bearing", as the planner builds them -- else None
+    (:func:`as_report` then converts it, or says what is wrong). What as_report would
+    return for it, without its per-report checks (most of build_complex's time at 1,000
+    robots)."""
+    if type(r) is not dict:
+        return None
+    nb = r.get("neighbours")
+    t = r.get("touch", False)
+    b = r.get("touch_bearing")
+    if (type(nb) is not dict or type(t) is not bool
+            or not (b is None or type(b) is float)
+            or not all(type(k) is int and k >= 0 for k in nb)
+            or not all(type(v) is float or type(v) is np.float64 for v in nb.values())):
+        return None
+    return nb, t, b
+
+
 def build_complex(reports: Mapping[int, Any]) -> Complex:
     """Build the 2-skeleton from per-robot reports (spec 2.1 with symmetric visibility).
 
@@ -348,7 +369,13 @@ def build_complex(reports: Mapping[int, Any]) -> Complex:
     ignored. Triangles are all 3-cliques. Bearings of both directions are stored.
     """
     ids_in = _node_ids(reports.keys(), "build_complex")
-    reps = {i: as_report(r, f"build_complex: report of robot {k!r}") for i, (k, r) in zip(ids_in, reports.items())}
+    reps = {}
+    for i, (k, r) in zip(ids_in, reports.items()):
+        got = _plain_report(r)
+        if got is None:
+            rr = as_report(r, f"build_complex: report of robot {k!r}")
+            got = (rr.neighbours, rr.touch, rr.touch_bearing)
+        reps[i] = got
     ids = np.array(sorted(reps), dtype=_I64)
     n = ids.shape[0]
     src_l: list[int] = []
@@ -357,15 +384,14 @@ def build_complex(reports: Mapping[int, Any]) -> Complex:
     touch = np.zeros(n, dtype=bool)
     tb = np.full(n, np.nan)
     for p, rid in enumerate(ids.tolist()):
-        r = reps[rid]
-        nb = r.neighbours
+        nb, t, b = reps[rid]
         src_l.extend([p] * len(nb))
         dst_l.extend(nb.keys())
         brg_l.extend(nb.values())
-        if r.touch:
+        if t:
             touch[p] = True
-            if r.touch_bearing is not None:
-                tb[p] = r.touch_bearing
+            if b is not None:
+                tb[p] = b
     src = np.array(src_l, dtype=_I64)
     dst_ids = np.array(dst_l, dtype=_I64)
     brg = np.array(brg_l, dtype=np.float64)

@@ -114,7 +114,8 @@ def plan_pushes(
     blocked_edges: set[tuple[int, int]] = set()
     blocked: set = set()
     out: list[PushPath] = []
-    targets = {cx.index_of(k): lst for k, lst in fence.deployments.items() if k in cx}
+    dk = [k for k in fence.deployments if k in cx]
+    targets = dict(zip(cx.index(dk).tolist(), (fence.deployments[k] for k in dk))) if dk else {}
     for _ in range(max(0, int(max_paths))):
         st = [p for p in cx.index(starts).tolist() if not used[p]]
         if not st:

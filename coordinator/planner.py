@@ -149,8 +149,8 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     cx, fence = _complex_and_fence(snap, params, test_drive_failures, evidence)
     cert = certify(cx, fence)
     ids = cx.ids
-    edges = [tuple(int(x) for x in ids[e]) for e in cx.edges]
-    tris = [tuple(int(x) for x in ids[t]) for t in cx.triangles]
+    edges = list(map(tuple, ids[cx.edges].tolist()))
+    tris = list(map(tuple, ids[cx.triangles].tolist()))
     plan = CyclePlan(edges=edges, triangles=tris, frontier=[int(e) for e in fence.frontier],
                      obstacle=[int(e) for e in fence.obstacle],
                      certified=bool(cert.certified) and fence.z.size > 0,
@@ -353,6 +353,8 @@ def _place_on_lattice(snap: Snapshot, jobs: list[JobSpec], spacing: float,
 
     if not snap.sources or any(k != "holonomic" for k in snap.kinds.values()):
         return
+    if all(job.kind == "probe" for job in jobs):
+        return          # probes are never moved onto the lattice: no shape estimate needed
     root = snap.sources[0]
     head = align_headings(snap.nbrs, snap.kinds, root=root)
     X = estimate_shape(snap.nbrs, head, snap.known, root=root, default_edge=spacing)
@@ -361,13 +363,14 @@ def _place_on_lattice(snap: Snapshot, jobs: list[JobSpec], spacing: float,
     axis = snap.source_dirs[0] if snap.source_dirs else 0.0
     lat = Lattice(X[root], axis, spacing)
     reach = min(1.02 * spacing, params.rv * (1.0 - 1e-3))
-    taken = [X[v] for v in X]
+    XP = np.array(list(X.values())).reshape(-1, 2)   # estimated positions, in X's order
+    taken = [XP]                  # blocks of points: the robots, then targets placed
     for job in fixed:
         f = job.path[-1]
         if f in X:
             a = job.direction + head.get(f, 0.0)
             d = params.d_td if job.distance is None else job.distance
-            taken.append(X[f] + d * np.array([math.cos(a), math.sin(a)]))
+            taken.append((X[f] + d * np.array([math.cos(a), math.sin(a)])).reshape(1, 2))
     for job in jobs:
         f = job.path[-1]
         if f not in X or job.kind == "probe":
@@ -384,11 +387,13 @@ def _place_on_lattice(snap: Snapshot, jobs: list[JobSpec], spacing: float,
             a, b = job.frontier_edge
             o = b if a == f else a
         po = X.get(o) if o is not None else None
-        near = [X[v] for v in X if np.hypot(*(X[v] - pf)) <= 2.5 * spacing]
+        near = XP[np.hypot(XP[:, 0] - pf[0], XP[:, 1] - pf[1]) <= 2.5 * spacing]
         local = lat.fitted(near) if len(near) >= 3 else lat
+        if len(taken) > 1:
+            taken = [np.concatenate(taken)]
         p = None
         for need_o in ((True, False) if po is not None else (False,)):
-            p = lattice_target(local, pf, po if need_o else None, u, taken, reach=reach,
+            p = lattice_target(local, pf, po if need_o else None, u, taken[0], reach=reach,
                                min_sep=0.35 * spacing, min_dist=0.5 * spacing,
                                blocked=walls, side_from=po)
             if p is not None:
@@ -397,9 +402,9 @@ def _place_on_lattice(snap: Snapshot, jobs: list[JobSpec], spacing: float,
         if p is not None:
             job.direction = wrap(math.atan2(p[1] - pf[1], p[0] - pf[0]) - head.get(f, 0.0))
             job.distance = float(np.hypot(*(p - pf)))
-            taken.append(p)
+            taken.append(np.reshape(p, (1, 2)))
         else:
-            taken.append(pf + spacing * u)
+            taken.append((pf + spacing * u).reshape(1, 2))
         want = frontier_desired_bearings(snap.nbrs.get(f, {}), job.direction,
                                          d0=job.distance, rv=params.rv, old_vertex=f)
         job.deploy_landmarks = list(want)

@@ -166,6 +166,42 @@ def _fill_cycle(L: dict[int, set], gamma: set[tuple[int, int]]) -> list[tuple[in
     return None if subset is None else [tris[i] for i in subset]
 
 
+def _present(cx: Complex, node_ids) -> list:
+    """The ids of ``node_ids`` that are nodes of ``cx``, in their order (one vectorised
+    lookup instead of a ``v in cx`` per id)."""
+    ids = list(node_ids)
+    if not ids or cx.n == 0:
+        return []
+    q = np.asarray(ids, dtype=_I64)
+    p = np.minimum(np.searchsorted(cx.ids, q), cx.n - 1)
+    return [v for v, ok in zip(ids, (cx.ids[p] == q).tolist()) if ok]
+
+
+def _in_four_clique(cx: Complex) -> np.ndarray:
+    """(n,) bool: the vertices in some 4-clique of the complex's graph. Each 4-clique
+    a < b < c < d is found once, from its triangle abc and d among c's higher neighbours."""
+    n = cx.n
+    out = np.zeros(n, dtype=bool)
+    t = cx.triangles
+    if t.shape[0] == 0:
+        return out
+    u, v = cx.edges[:, 0], cx.edges[:, 1]
+    fptr = np.zeros(n + 1, dtype=_I64)          # edge rows are sorted: c's forward list
+    np.cumsum(np.bincount(u, minlength=n), out=fptr[1:])
+    c = t[:, 2]
+    cnt = fptr[c + 1] - fptr[c]
+    total = int(cnt.sum())
+    if total == 0:
+        return out
+    rep = np.repeat(np.arange(t.shape[0], dtype=_I64), cnt)
+    offs = np.arange(total, dtype=_I64) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    d = v[fptr[c][rep] + offs]
+    hit = (cx.edge_index(t[rep, 0], d) >= 0) & (cx.edge_index(t[rep, 1], d) >= 0)
+    out[t[rep[hit]].ravel()] = True
+    out[d[hit]] = True
+    return out
+
+
 def find_redundant(
     cx: Complex,
     fence,
@@ -196,10 +232,10 @@ def find_redundant(
         prot[cx.edges[z].ravel()] = True
     front_ids: list[int] = []
     if hasattr(fence, "fence_vertices"):
-        fv = [v for v in fence.fence_vertices if v in cx]
+        fv = _present(cx, fence.fence_vertices)
         if fv:
             prot[cx.index(fv)] = True
-        front_ids = [v for v in fence.frontier_vertices if v in cx] or fv
+        front_ids = _present(cx, fence.frontier_vertices) or fv
     if not front_ids and z.size:
         front_ids = cx.ids[np.unique(cx.edges[z].ravel())].tolist()
 
@@ -226,11 +262,20 @@ def find_redundant(
     tri = cx.triangles
     removed: list[int] = []
     tried = 0
+    # a robot whose link has more edges (its triangles) than a tree on its neighbours and
+    # no triangle (it is in no 4-clique) has a cycle in its link: rejected without building
+    # the link, while no neighbour has left (most robots of a sparse swarm; the link test
+    # in Python was most of the pass's time at 1,000 robots)
+    cyclic = (np.diff(vptr) - deg + 1 > 0) & ~_in_four_clique(cx)
+    changed = np.zeros(n, dtype=bool)   # a neighbour left: its link is no longer cx's
     while heap:
         _, c = heapq.heappop(heap)
         if state[c] != 0:
             continue
         tried += 1
+        if cyclic[c] and not changed[c]:
+            state[c] = 1
+            continue
         V = len(nbr[c])
         L = _link_graph(nbr, c)
         if V == 0:
@@ -270,6 +315,7 @@ def find_redundant(
         removed.append(c)
         for a in nbr[c]:
             nbr[a].discard(c)
+            changed[a] = True
             if state.get(a) == 1:
                 state[a] = 0
                 heapq.heappush(heap, (keys[a], a))
