@@ -218,11 +218,14 @@ class _Local:
             self._d[p] = d
         return d
 
-    def nearest_on_side(self, p: int, ref: int, sigma: int):
+    def nearest_on_side(self, p: int, ref: int, sigma: int, thin: float = 0.0):
         """Neighbour l != ref of p with sign(theta^p_{ref l}) = sigma and the smallest
-        |angle|; returns (l, |angle|) or (None, None)."""
+        |angle|; returns (l, |angle|) or (None, None). thin: neighbours under this angle
+        that ref sees too are skipped (a near-collinear triangle p-ref-l whose side test
+        fell on this side by noise says nothing about the side)."""
         d = self.bearings(p)
         t0 = d[ref]
+        dref = self.bearings(ref) if thin > 0.0 else {}
         best, best_a = None, None
         for l, tl in d.items():
             if l == ref:
@@ -230,6 +233,8 @@ class _Local:
             a = wrap(tl - t0)
             if _sgn(a) == sigma:
                 aa = abs(a)
+                if aa < thin and l in dref:
+                    continue
                 if best_a is None or aa < best_a:
                     best, best_a = l, aa
         return best, best_a
@@ -310,6 +315,25 @@ def _is_exception(L: _Local, u: int, v: int, sigma: int, apexes) -> bool:
         if any(p in Bv for _, p in reach[1:]):
             return True
     return False
+
+
+def _corner(L: _Local, p: int, q: int, k, gap, thr: float) -> bool:
+    """The convex-corner / occlusion case (spec 3.3 ii) at p for edge p-q: p's nearest
+    neighbour k on the open side is under thr from q, and q and k do not see each other.
+    Only then must an obstacle block the view between them; a k that q does see (a
+    near-collinear triangle whose side test fell on one side by noise) proves nothing, and
+    ``nearest_on_side(thin=thr)`` skips it (bench/truth.py map 11 certified 21.8 % of a room
+    through one; deploying at half its gap instead stacked robots on one point, map 129)."""
+    return k is not None and gap < thr and k not in L.bearings(q)
+
+
+def _reflex(L: _Local, p: int, q: int, sigma: int) -> bool:
+    """p's open wedge from its neighbour q, turning the sigma way, is reflex (> _REFLEX)."""
+    bp = L.bearings(p)
+    t0 = bp[q]
+    wedge = min(((sigma * (t - t0)) % (2.0 * math.pi) for l, t in bp.items() if l != q),
+                default=2.0 * math.pi)
+    return wedge > _REFLEX
 
 
 def _touch_ok(cx: Complex, L: _Local, p: int, tau: float) -> float | None:
@@ -407,12 +431,16 @@ def detect_fence(
       ``probe_clear`` found room (its robot stayed there) and is never offered again; an
       interior probe given up from one end in ``probe_unreachable`` (its approach leg kept
       failing) is offered from the other end only. Neither is evidence of a wall: a side
-      whose probes are all touched, clear or unreached from both ends, with one not
-      touched, stays frontier ('probing') with no deployment, and the run ends uncertified
-      (``TopologyParams.clear_infers`` instead closes it as inferred 'probe_clear' when
-      some probe was clear and none is left).
+      whose probes are all touched or unreached from both ends closes as the inference
+      'probe_unreachable'; with some clear and none left, as 'probe_clear' (all others
+      touched) or 'probe_unreachable' (some unreached) -- with
+      ``TopologyParams.clear_infers`` off those stay frontier with no deployment, and the
+      run ends uncertified.
     Inferred closures (no probe): the convex-corner / occlusion rule (pi/3 - 2 beta, reason
-    'convex_corner') and ``forced_obstacle`` ('forced'); ``Fence.inferred`` lists them.
+      'convex_corner': p's nearest neighbour k on the open side is under the threshold from
+      q, and q does not see k; when only one end sees such a corner and the other end's
+      open wedge on that side is reflex, that end deploys there first and the side closes
+      once it has no room) and ``forced_obstacle`` ('forced'); ``Fence.inferred`` lists them.
     Guarantee: with edges <= rv, for a side closed on evidence, every opening at least
     door_min_rv wide whose span lies within the edge's was crossed by a probe line with the
     robot's body clear of both jambs, and that probe touched within the deployer's
@@ -465,6 +493,10 @@ def detect_fence(
     # per candidate: list of (sigma, offset_u, offset_v) and corner marks
     open_sides: dict[int, list[list]] = {}
     marks: dict[tuple[int, int], str] = {}
+    # convex corners seen from one end whose far end has a reflex open wedge on that side:
+    # (e, sigma) -> (far end, near end, far end's offset); closed once the far end has no
+    # room, a frontier side deployed from the far end only until then
+    corner_wait: dict[tuple[int, int], tuple[int, int, float | None]] = {}
     for e in cand.tolist():
         u, v = int(cx.edges[e, 0]), int(cx.edges[e, 1])
         sides = ([1] if not pos[e] else []) + ([-1] if not neg[e] else [])
@@ -477,20 +509,27 @@ def detect_fence(
         recs = []
         for sg in sides:
             rec = [sg, None, None]
-            ku, gu = L.nearest_on_side(u, v, sg)
-            if ku is not None and gu < thr:
-                marks[(e, sg)] = "convex_corner"
-                e2 = int(cx.edge_index(u, ku))
-                marks.setdefault((e2, _canon(u, ku, -sg)), "convex_corner")
-            else:
+            ku, gu = L.nearest_on_side(u, v, sg, thin=thr)
+            kv, gv = L.nearest_on_side(v, u, -sg, thin=thr)
+            cu = _corner(L, u, v, ku, gu, thr)
+            cv = _corner(L, v, u, kv, gv, thr)
+            if not cu:
                 rec[1] = sg * min(_PI3, (gu if gu is not None else math.pi) / 2.0)
-            kv, gv = L.nearest_on_side(v, u, -sg)
-            if kv is not None and gv < thr:
-                marks[(e, sg)] = "convex_corner"
-                e2 = int(cx.edge_index(v, kv))
-                marks.setdefault((e2, _canon(v, kv, sg)), "convex_corner")
-            else:
+            if not cv:
                 rec[2] = -sg * min(_PI3, (gv if gv is not None else math.pi) / 2.0)
+            for near, far, k, s_near, off_far in ((u, v, ku, sg, rec[2]), (v, u, kv, -sg, rec[1])):
+                if not (cu if near == u else cv):
+                    continue
+                # the occlusion argument covers the wedge far-near-k only; a far end whose
+                # own open wedge on this side is reflex sees free space beyond it (a robot
+                # in a doorway): the side closes only once that end has no room either
+                if (cu and cv) or not _reflex(L, far, near, -s_near):
+                    marks[(e, sg)] = "convex_corner"
+                else:
+                    corner_wait[(e, sg)] = (far, near, off_far)
+                e2 = int(cx.edge_index(near, k))
+                if not _reflex(L, k, near, s_near):
+                    marks.setdefault((e2, _canon(near, k, -s_near)), "convex_corner")
             recs.append(rec)
         open_sides[e] = recs
 
@@ -539,11 +578,7 @@ def detect_fence(
         if off is None or abs(off) < _PI3 - 1e-9 or n_tri_at[p] == 0:
             return None
         sg = 1 if off > 0 else -1
-        bp = L.bearings(p)
-        t0 = bp[q]
-        wedge = min(((sg * (t - t0)) % (2.0 * math.pi) for l, t in bp.items() if l != q),
-                    default=2.0 * math.pi)
-        return wrap(t0 + sg * _DEEP) if wedge > _REFLEX else None
+        return wrap(L.bearings(p)[q] + sg * _DEEP) if _reflex(L, p, q, sg) else None
 
     def _side_closed(p: int, q: int, off) -> bool:
         """p has no room on this side: its 60-deg direction, and a reflex side's deep probe."""
@@ -573,6 +608,10 @@ def detect_fence(
                 # failure closing the side left whole rooms behind doors uncovered)
                 if _side_closed(u, v, off_u) and _side_closed(v, u, off_v):
                     ends.setdefault((e, sg), "test_drive")
+
+    for (e, sg), (far, near, off) in corner_wait.items():
+        if (e, sg) not in marks and _side_closed(far, near, off):
+            marks[(e, sg)] = "convex_corner"
 
     # ---- evidence (spec 3.4 amendment 2026-11): ends that have no room are not enough. A
     # side the ends would close becomes O only once every probe of it touched: the end
@@ -650,10 +689,17 @@ def detect_fence(
             # certificate ('probe_unreachable'). Leaving such sides open stopped real runs
             # uncertified at 100% coverage (the 0.8 m door map: "no feasible push")
             marks[(e, sg)] = "probe_unreachable"
+        elif P.clear_infers:
+            # nothing left to try: some probe found room (its robot stands beyond the side
+            # yet forms no triangle with it: something between them blocks the view) and the
+            # others' approach legs clip an obstacle on the edge from both ends. Closed as
+            # the inference 'probe_unreachable', like either case alone. Left open, 95 of
+            # bench/truth.py's 500 maps (seed 0) ended stuck uncertified, every one of them
+            # fully covered by the oracle's raster
+            marks[(e, sg)] = "probe_unreachable"
         else:
-            # a probe that found room while the side stays one-sided: no evidence closes it
-            # and nothing is left to try. Frontier with no deployment: the run ends
-            # uncertified (honest), never a closure
+            # clear_infers off: no evidence closes it and nothing is left to try. Frontier
+            # with no deployment: the run ends uncertified (honest), never a closure
             probing[(e, sg)] = []
 
     for pair in forced_obstacle:
@@ -685,11 +731,14 @@ def detect_fence(
                 for d in probing[(e, sg)]:
                     deps.setdefault(cx.index_of(d.vertex), []).append(d)
                 continue
-            du = wrap(Bu[v] + off_u)
-            dv = wrap(Bv[u] + off_v)
+            # an end that sees a convex corner on this side (corner_wait) does not deploy
+            du = None if off_u is None else wrap(Bu[v] + off_u)
+            dv = None if off_v is None else wrap(Bv[u] + off_v)
             sides.append(FenceSide(sg, "frontier", "open", du, dv, off_u, off_v))
             edge_ids = (int(ids[u]), int(ids[v]))
             for p, q, d, off in ((u, v, du, off_u), (v, u, dv, off_v)):
+                if off is None:
+                    continue
                 deps.setdefault(p, []).append(
                     Deployment(int(ids[p]), d, edge_ids, sg, off, L.clearance(p, d), "edge"))
                 deep = _deep(p, q, off) if _blocked(p, d) else None

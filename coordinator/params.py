@@ -25,7 +25,8 @@ class TopologyParams:
     corner_probes: convex-corner marks (spec 3.3 ii) only make a side a probing candidate
       (True) instead of closing it as the reported inference 'convex_corner' (False).
     clear_infers: a side whose probes are all done, some clear, while it stays one-sided,
-      closes as the reported inference 'probe_clear' (True) or stays frontier with no
+      closes as the reported inference 'probe_clear' (the others touched) or
+      'probe_unreachable' (some unreached from both ends) (True), or stays frontier with no
       deployment left (False: the run cannot certify).
     """
 

@@ -301,3 +301,33 @@ def test_a_single_file_end_tries_every_direction_of_its_open_wedge():
     sf = sorted(a for k, a in seen if k == "single_file")
     assert sf == [120, 120, 180]
     assert not detect_fence(cx, **ev.fence_kwargs()).deployments.get(0)
+
+
+def test_a_clear_probe_with_the_rest_unreached_closes_only_as_inferred():
+    """bench/truth.py seed 0: 95 of 500 maps ended stuck (frontier, no deployment), every
+    one fully covered: a side with one probe clear (its robot stands beyond the side, yet no
+    triangle forms) and the others unreached from both ends. Nothing is left to try: with
+    clear_infers (default) it closes as the reported inference 'probe_unreachable'; without
+    it the side stays frontier with no deployment (the run ends uncertified)."""
+    P, rep, _ = _door_pair(0.8)
+    cx = build_complex(rep)
+    e = int(cx.edge_index(0, 1))
+    ev = Evidence()
+    probes = _probes(detect_fence(cx, **ev.fence_kwargs()))
+    fracs = sorted({probe_key(d.vertex, d.edge, d.sigma, d.via_frac)[3] for d in probes})
+    assert len(fracs) >= 2
+    for d in probes:
+        f_ = probe_key(d.vertex, d.edge, d.sigma, d.via_frac)[3]
+        if f_ == fracs[0]:
+            ev.record(d, touched=False)                 # clear: room there
+        else:
+            for _ in range(Evidence.UNREACHED_LIMIT):
+                ev.record_unreached(d)                  # its approach clips from this end
+    f = detect_fence(cx, **ev.fence_kwargs())
+    assert not _probes(f) and e in f.obstacle.tolist()
+    assert f.by_index[e].sides[0].why == "probe_unreachable"
+    assert (e, "probe_unreachable") in [(int(a), w) for a, w in f.inferred]
+    f = detect_fence(cx, TopologyParams(clear_infers=False), **ev.fence_kwargs())
+    assert e in f.frontier.tolist() and not f.obstacle.size and not _probes(f)
+    assert f.by_index[e].sides[0].why == "probing"
+    assert not any(d.edge == (0, 1) for lst in f.deployments.values() for d in lst)

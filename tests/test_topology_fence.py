@@ -176,15 +176,61 @@ def test_touch_towards_a_visible_robot_is_not_an_obstacle_contact():
     assert _pairs(cx, f.obstacle) == {(0, 1)}
 
 
-def _corner(angle_deg, **params):
+def _corner(angle_deg, tips=True, **params):
+    """Robot 0 at an obstacle corner that hides 1 from 2 (the wedge 1-0-2 is angle_deg).
+    tips: robots 5 and 6 straight beyond 1 and 2, so that neither far end has a reflex
+    open wedge on the corner's side; without them 1 and 2 are tips of the swarm."""
     a = angle_deg * DEG
     i, j = np.array([0.0, 0.0]), np.array([0.8, 0.0])
     k = 0.8 * np.array([math.cos(a), math.sin(a)])
     b = a + 50 * DEG
-    P = np.array([i, j, k, [0.4, -0.5], 0.64 * np.array([math.cos(b), math.sin(b)])])
+    pts = [i, j, k, [0.4, -0.5], 0.64 * np.array([math.cos(b), math.sin(b)])]
+    if tips:
+        pts += [2.0 * j, 2.0 * k]
     mid = (j + k) / 2
     # an obstacle corner hides j from k
-    return _fence(P, discs=[(mid[0], mid[1], 0.05)], params=TopologyParams(**params))
+    return _fence(np.array(pts), discs=[(mid[0], mid[1], 0.05)], params=TopologyParams(**params))
+
+
+def test_convex_corner_at_a_tip_waits_for_the_tips_own_drives():
+    """bench/truth.py map 70: a robot in a doorway (1 here) whose neighbour 0 sees a jamb
+    corner between it and 2. The occlusion argument covers the wedge 1-0-2 only; 1's own
+    open wedge is reflex and leads into the next room. The side stays frontier, deployed
+    from 1 (not from 0, into the thin wedge), and closes as 'convex_corner' only once 1's
+    drives there (its 60 deg one and its reflex second probe) touched."""
+    cx, f = _corner(50, tips=False)
+    es = {int(cx.edge_index(0, 1)): 1, int(cx.edge_index(0, 2)): 2}
+    for e, far in es.items():
+        assert e in f.frontier.tolist() and f.by_index[e].sides[0].reason == "open"
+        pair = tuple(sorted((0, far)))
+        assert not any(d.edge == pair for d in f.deployments.get(0, ()))
+        assert any(d.edge == pair and d.kind == "edge" for d in f.deployments.get(far, ()))
+    fails: dict[int, list[float]] = {1: [], 2: []}
+    for _ in range(4):  # fail every drive the far ends offer on these edges, deep ones too
+        f2 = detect_fence(cx, test_drive_failures=fails)
+        new = [(far, d.bearing) for far in fails for d in f2.deployments.get(far, ())
+               if d.edge == (0, far)]
+        for far, b in new:
+            fails[far].append(b)
+        if not new:
+            break
+    assert len(fails[1]) == 2 and len(fails[2]) == 2  # the 60 deg drive and the deep probe
+    f2 = _probed(cx, test_drive_failures=fails)
+    for e in es:
+        assert f2.by_index[e].sides[0].reason == "convex_corner" and e in f2.obstacle.tolist()
+
+
+def test_convex_corner_needs_the_far_ends_not_to_see_each_other():
+    """A neighbour of 0 within the threshold that the far end does see (a near-collinear
+    triangle whose side test fell on one side by noise; bench/truth.py map 11 certified
+    21.8 % of a room so) is no convex corner: nothing blocks the view."""
+    P = np.array([[0.0, 0.0], [0.9, 0.0], [0.45, 0.003]])
+    rep = reports(P)
+    rep[1]["neighbours"][2] = wrap(rep[1]["neighbours"][2] + 0.9 * DEG)  # 2 seen across 0-1
+    cx = build_complex(rep)
+    f = detect_fence(cx)
+    assert int(cx.edge_index(0, 1)) in f.frontier.tolist()
+    assert not any(sd.reason == "convex_corner" for fe in f.edges for sd in fe.sides)
 
 
 def test_convex_corner_below_threshold_marks_both_edges_obstacle():

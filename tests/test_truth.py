@@ -152,12 +152,6 @@ def test_sample_grows_and_agrees_with_the_oracle(sample):
     assert s["algebra_mismatch"] == 0
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "known false certificate (issue 21, open): map 11 (clutter) is certified with 5 robots at "
-    "21.8% coverage through a convex-corner inference (spec 3.3 ii assumes the occluding corner "
-    "belongs to a wall; a free-standing box breaks it). Probing corner sides "
-    "(TopologyParams.corner_probes) removes it but ran clutter maps 10-12 to the robot "
-    "cap. strict: this test turns red the day the sample has none, to drop this mark"))
 def test_sample_has_no_false_certificates(sample):
     """Certified must mean covered: no map (bar doors narrower than 0.4 rv) may end
     certified while a robot could reach uncovered free area beyond 0.5 rv from walls."""
