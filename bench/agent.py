@@ -31,7 +31,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from bench.common import CLK, cpu_seconds, eprint, free_port, wait_line  # noqa: E402
+from bench.common import CLK, cpu_seconds, eprint, free_port, stop_all, wait_line  # noqa: E402
 
 
 # --------------------------------------------------------------------------- echo process
@@ -252,15 +252,7 @@ def main(argv=None) -> int:
     finally:
         if session is not None:
             session.close()
-        for p in reversed(procs):
-            if p.poll() is None:
-                p.send_signal(2)
-        for p in reversed(procs):
-            try:
-                p.wait(10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+        stop_all(procs)
     if args.split_n > 0:
         result["split"] = sp = split(args.split_n)
         for name, ph in sp.items():

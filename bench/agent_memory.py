@@ -49,7 +49,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from bench.common import eprint, free_port, wait_line  # noqa: E402
+from bench.common import eprint, free_port, starter, stop_all, wait_line  # noqa: E402
 
 HEAVY = ("numpy", "scipy", "pymunk", "matplotlib", "PIL", "shapely", "networkx")
 
@@ -132,28 +132,11 @@ time.sleep(600)
 """
 
 
-def _stop(procs) -> None:
-    for p in reversed(procs):
-        if p.poll() is None:
-            p.send_signal(2)
-    for p in reversed(procs):
-        try:
-            p.wait(10)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait()
-
-
 def floor(py: str, env: dict, settle_s: float) -> dict:
     """USS/PSS of a sleeping bare interpreter and of one holding only a Zenoh session."""
     ep = f"tcp/127.0.0.1:{free_port()}"
     procs: list[subprocess.Popen] = []
-
-    def start(argv):
-        p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                             stdin=subprocess.DEVNULL, text=True, env=env, cwd=str(ROOT))
-        procs.append(p)
-        return p
+    start = starter(procs, env, str(ROOT))
 
     try:
         router = start([py, "-m", "swarmcover", "router", "--listen", ep])
@@ -168,7 +151,7 @@ def floor(py: str, env: dict, settle_s: float) -> dict:
             m = memory_mb(p.pid)
             out[name] = {k: round(m[k], 2) for k in ("rss", "pss", "uss")}
     finally:
-        _stop(procs)
+        stop_all(procs)
     return out
 
 
@@ -177,12 +160,7 @@ def measure(n: int, py: str, env: dict, run_config: str, settle_s: float) -> dic
     ep = f"tcp/127.0.0.1:{free_port()}"
     swarm = f"mem{os.getpid()}n{n}"
     procs: list[subprocess.Popen] = []
-
-    def start(argv):
-        p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                             stdin=subprocess.DEVNULL, text=True, env=env, cwd=str(ROOT))
-        procs.append(p)
-        return p
+    start = starter(procs, env, str(ROOT))
 
     try:
         router = start([py, "-m", "swarmcover", "router", "--listen", ep])
@@ -199,7 +177,7 @@ def measure(n: int, py: str, env: dict, run_config: str, settle_s: float) -> dic
         heavy = sorted({h for a in agents for h in heavy_mapped(a.pid)})
         threads = len(os.listdir(f"/proc/{agents[0].pid}/task"))
     finally:
-        _stop(procs)
+        stop_all(procs)
     res = {"agents": n, "heavy_mapped": heavy, "threads_per_agent": threads}
     for k in ("rss", "pss", "uss", "pss_anon", "pss_file"):
         res[f"{k}_mb_per_agent"] = round(statistics.mean(x[k] for x in per), 2)

@@ -1,9 +1,10 @@
 """What the benchmarks that start real processes share: progress on stderr, a free port,
-a process's CPU time, waiting for a line of a child's stdout."""
+a process's CPU time, waiting for a line of a child's stdout, stopping children."""
 from __future__ import annotations
 
 import os
 import socket
+import subprocess
 import sys
 import time
 
@@ -37,3 +38,28 @@ def wait_line(proc, needle, timeout=30.0) -> str:
         if needle in line:
             return line
     raise RuntimeError(f"no {needle!r} from {proc.args}")
+
+
+def stop_all(procs, grace_s: float = 10.0) -> None:
+    """SIGINT every child still running (the last started first), then wait for each up to
+    ``grace_s`` and kill what is left."""
+    for p in reversed(procs):
+        if p.poll() is None:
+            p.send_signal(2)
+    for p in reversed(procs):
+        try:
+            p.wait(grace_s)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+
+
+def starter(procs: list, env=None, cwd=None):
+    """A function that starts argv as a child (stdout a text pipe, stderr and stdin
+    closed) and appends it to ``procs``, for :func:`stop_all`."""
+    def start(argv):
+        p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                             stdin=subprocess.DEVNULL, text=True, env=env, cwd=cwd)
+        procs.append(p)
+        return p
+    return start
