@@ -438,9 +438,10 @@ def detect_fence(
       run ends uncertified.
     Inferred closures (no probe): the convex-corner / occlusion rule (pi/3 - 2 beta, reason
       'convex_corner': p's nearest neighbour k on the open side is under the threshold from
-      q, and q does not see k; when only one end sees such a corner and the other end's
-      open wedge on that side is reflex, that end deploys there first and the side closes
-      once it has no room) and ``forced_obstacle`` ('forced'); ``Fence.inferred`` lists them.
+      q, and q does not see k; with ``TopologyParams.corner_wait``, when only one end sees
+      such a corner and the other end's open wedge on that side is reflex, that end deploys
+      there first and the side closes once it has no room) and ``forced_obstacle``
+      ('forced'); ``Fence.inferred`` lists them.
     Guarantee: with edges <= rv, for a side closed on evidence, every opening at least
     door_min_rv wide whose span lies within the edge's was crossed by a probe line with the
     robot's body clear of both jambs, and that probe touched within the deployer's
@@ -523,12 +524,12 @@ def detect_fence(
                 # the occlusion argument covers the wedge far-near-k only; a far end whose
                 # own open wedge on this side is reflex sees free space beyond it (a robot
                 # in a doorway): the side closes only once that end has no room either
-                if (cu and cv) or not _reflex(L, far, near, -s_near):
+                if (cu and cv) or not P.corner_wait or not _reflex(L, far, near, -s_near):
                     marks[(e, sg)] = "convex_corner"
                 else:
                     corner_wait[(e, sg)] = (far, near, off_far)
                 e2 = int(cx.edge_index(near, k))
-                if not _reflex(L, k, near, s_near):
+                if not (P.corner_wait and _reflex(L, k, near, s_near)):
                     marks.setdefault((e2, _canon(near, k, -s_near)), "convex_corner")
             recs.append(rec)
         open_sides[e] = recs

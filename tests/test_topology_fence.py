@@ -197,8 +197,10 @@ def test_convex_corner_at_a_tip_waits_for_the_tips_own_drives():
     corner between it and 2. The occlusion argument covers the wedge 1-0-2 only; 1's own
     open wedge is reflex and leads into the next room. The side stays frontier, deployed
     from 1 (not from 0, into the thin wedge), and closes as 'convex_corner' only once 1's
-    drives there (its 60 deg one and its reflex second probe) touched."""
-    cx, f = _corner(50, tips=False)
+    drives there (its 60 deg one and its reflex second probe) touched
+    (TopologyParams.corner_wait; off by default, when the side closes at once)."""
+    P = TopologyParams(corner_wait=True)
+    cx, f = _corner(50, tips=False, corner_wait=True)
     es = {int(cx.edge_index(0, 1)): 1, int(cx.edge_index(0, 2)): 2}
     for e, far in es.items():
         assert e in f.frontier.tolist() and f.by_index[e].sides[0].reason == "open"
@@ -207,7 +209,7 @@ def test_convex_corner_at_a_tip_waits_for_the_tips_own_drives():
         assert any(d.edge == pair and d.kind == "edge" for d in f.deployments.get(far, ()))
     fails: dict[int, list[float]] = {1: [], 2: []}
     for _ in range(4):  # fail every drive the far ends offer on these edges, deep ones too
-        f2 = detect_fence(cx, test_drive_failures=fails)
+        f2 = detect_fence(cx, P, test_drive_failures=fails)
         new = [(far, d.bearing) for far in fails for d in f2.deployments.get(far, ())
                if d.edge == (0, far)]
         for far, b in new:
@@ -215,9 +217,11 @@ def test_convex_corner_at_a_tip_waits_for_the_tips_own_drives():
         if not new:
             break
     assert len(fails[1]) == 2 and len(fails[2]) == 2  # the 60 deg drive and the deep probe
-    f2 = _probed(cx, test_drive_failures=fails)
+    f2 = _probed(cx, P, test_drive_failures=fails)
     for e in es:
         assert f2.by_index[e].sides[0].reason == "convex_corner" and e in f2.obstacle.tolist()
+    f3 = _corner(50, tips=False)[1]                      # the default closes them at once
+    assert all(f3.by_index[e].sides[0].reason == "convex_corner" for e in es)
 
 
 def test_convex_corner_needs_the_far_ends_not_to_see_each_other():
