@@ -3,11 +3,12 @@
 The criterion (the only one: :func:`certify` decides it, :func:`verify_certificate`
 checks it). The *target* is a set of edges z_raw: a Fence's one-sided fence edges
 (``Fence.z_raw``) or an explicit edge set. Its *closure zone* S is, for a Fence, every
-edge outside z_raw with both ends within one hop of an odd-degree vertex of z_raw (empty
-when z_raw is a cycle, and always empty for an explicit edge set). The target is
-*certified* when z_raw is not empty and a set of triangles alpha (the chain) and a set
-f of zone edges (the closure) satisfy boundary(alpha) = z_raw + f over GF(2); z = z_raw
-+ f is the certificate's cycle. Otherwise it is *refused*, with an obstruction: a cocycle
+edge outside z_raw with both ends within one hop of an odd-degree vertex of z_raw, and
+every edge of z_raw at an odd vertex (empty when z_raw is a cycle, and always empty for
+an explicit edge set). The target is *certified* when z_raw is not empty and a set of
+triangles alpha (the chain) and a set f of zone edges (the closure) satisfy
+boundary(alpha) = z_raw + f over GF(2); z = z_raw + f is the certificate's cycle (an f
+edge in z_raw leaves it). Otherwise it is *refused*, with an obstruction: a cocycle
 psi (every triangle has an even number of edges in psi) that misses S and meets z_raw an
 odd number of times, which proves that no such alpha and f exist. Exactly one of the two
 holds (Fredholm alternative). An empty target is refused without an obstruction.
@@ -17,7 +18,16 @@ line of sight): for a point x on no edge, the number of triangles of alpha conta
 and the number of edges of z crossed by a ray from x agree mod 2 (true for one triangle,
 and summing over alpha counts each edge boundary(alpha)_e times). So every point that z
 encloses an odd number of times lies in a triangle of alpha, within rv of each of its
-three robots (README, "The topology core").
+three robots (README, "The topology core"). z and z_raw differ only on zone edges, within
+one hop of the odd vertices, where z_raw encloses nothing well defined (it is not a cycle
+there). Why target edges at odd vertices may leave z: Rips triangles overlap. Two
+triangles on the same side of a shared edge e (a fold, where edges cross) make e and
+both their outer edges one-sided, yet a GF(2) chain counts their overlap twice and
+cancels e, so no chain's boundary holds all three (the obstruction is those three edges,
+a cocycle inside z_raw, whatever else f may add). Dropping such an edge only stops the
+certificate from claiming the points beside it (the overlap, covered twice); every
+point z encloses an odd number of times is still in a triangle of alpha. bench/truth.py
+seed 0: 26 of 491 covered end states were refused on such folds (bench/refusals.py).
 
 How it is solved (all on the complex alone, no positions):
 
@@ -85,7 +95,7 @@ class Certificate:
     chain_nodes (k, 3), hole_edge_nodes (k, 2), support: node-id views (support = the
       vertices of the chain).
     stats: counts from the solver (critical rows, peeling rounds, core size, closure).
-    target: edge ids of z_raw. closure: edge ids of f. closable: whether the target has
+    target: edge ids of z_raw. closure: edge ids of f (z = target XOR closure). closable: whether the target has
       a closure zone (a Fence's one-sided edges) or is an explicit, exact target.
     """
 
@@ -174,7 +184,8 @@ def _target(cx: Complex, target, where: str) -> tuple[np.ndarray, bool]:
 
 def closure_zone(cx: Complex, z_raw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(odd vertices (local indices), zone edge ids) of a target edge mask: the edges
-    outside z_raw with both ends within one hop of an odd-degree vertex of z_raw."""
+    outside z_raw with both ends within one hop of an odd-degree vertex of z_raw, and the
+    edges of z_raw at an odd vertex (a closure may drop those: module docstring)."""
     if not z_raw.any():
         return _EMPTY, _EMPTY
     odd = (np.bincount(cx.edges[z_raw].ravel(), minlength=cx.n) & 1).astype(bool)
@@ -184,7 +195,7 @@ def closure_zone(cx: Complex, z_raw: np.ndarray) -> tuple[np.ndarray, np.ndarray
     near = odd.copy()
     near[v[odd[u]]] = True
     near[u[odd[v]]] = True
-    return np.nonzero(odd)[0], np.nonzero(near[u] & near[v] & ~z_raw)[0]
+    return np.nonzero(odd)[0], np.nonzero((near[u] & near[v] & ~z_raw) | (z_raw & (odd[u] | odd[v])))[0]
 
 
 def boundary_of(cx: Complex, chain) -> np.ndarray:
@@ -238,7 +249,7 @@ def verify_certificate(cx: Complex, cert: Certificate, target=None) -> bool:
         if chain.size == 0 or not np.all(in_zone[f]):
             return False
         z = zm.copy()
-        z[f] = True  # f lies outside z_raw
+        z[f] ^= True  # an f edge in z_raw leaves it
         zc_m = np.zeros(cx.n_edges, dtype=bool)
         zc_m[zc] = True
         return bool(np.array_equal(zc_m, z) and np.array_equal(boundary_of(cx, chain), z))
@@ -680,15 +691,17 @@ def certify(cx: Complex, fence, *, seed: int | None = None) -> Certificate:
             if chain is not None:
                 _check(cx, chain, z1)
                 stats["closure"] = int(len(hint))
+                stats["closure_dropped"] = int(zr[np.asarray(hint, dtype=_I64)].sum())
                 return result(True, z1, chain, closure=np.asarray(hint, dtype=_I64))
     f, psi = S.closure(zr, odd, zone)
     if f is not None:
-        z2 = zr | f
+        z2 = zr ^ f
         chain, _ = S.solve(z2)
         if chain is None:  # pragma: no cover - the closure search guarantees a boundary
             raise AssertionError("closure search produced a non-boundary")
         _check(cx, chain, z2)
         stats["closure"] = int(f.sum())
+        stats["closure_dropped"] = int((f & zr).sum())
         return result(True, z2, chain, closure=np.nonzero(f)[0])
     stats["reason"] = "no closure of the target in its zone is a boundary"
     hole = np.nonzero(zr & np.isin(cx.edges, odd).any(1))[0]
