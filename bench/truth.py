@@ -412,7 +412,8 @@ def run_map(case: MapCase, *, per_cycle: int = 8, cap: int | None = None,
     end, cycles, placed, repeats, livelock = "cycles", 0, Counter(), Counter(), []
     t0 = time.process_time()
     for cycles in range(1, 6 * cap + 1):
-        cx = build_complex(sw.reports())
+        reps = sw.reports()         # one noisy sample per cycle, as the coordinator has
+        cx = build_complex(reps)
         fence = detect_fence(cx, P, default_bearing=sw.body(0, case.source_dir), **fb.kwargs())
         if not fence.deployments:
             # the deployer finishes only with no frontier edge either; frontier edges without
@@ -440,11 +441,14 @@ def run_map(case: MapCase, *, per_cycle: int = 8, cap: int | None = None,
             # although its robots arrived (they stack on one point), a livelock
             end = "livelock"
             livelock = [list(map(str, k)) for k, c in repeats.items() if c >= 3][:3]
-            cx = build_complex(sw.reports())
+            reps = sw.reports()
+            cx = build_complex(reps)
             fence = detect_fence(cx, P, default_bearing=sw.body(0, case.source_dir), **fb.kwargs())
             break
     cert = certify(cx, fence)
-    claim = _planner_claim(sw, case, P, fb)
+    # the claim from the same sample the last fence saw (a fresh noise sample gave another
+    # complex: 3 of 491 covered end states "refused" that way)
+    claim = _planner_claim(sw, case, P, fb, reps)
     grow_s = time.process_time() - t0
     pts = sw.points()
     ver = judge(ras, pts, case.source, RV, RADIUS, deep=0.5 * RV, min_area=0.01)
@@ -516,14 +520,13 @@ def _pushes(cx, fence, P, k: int, plan_pushes) -> list:
     return chosen
 
 
-def _planner_claim(sw: Swarm, case: MapCase, P, fb: Feedback) -> bool:
+def _planner_claim(sw: Swarm, case: MapCase, P, fb: Feedback, reps: dict) -> bool:
     """What the deployer would conclude from this swarm: ``coordinator.planner.plan_cycle``
-    on the same reports (no lattice, no redundancy pass), complete = certified with no
-    frontier edge and no deployment left (the deployer's finish)."""
+    on the same reports ``reps`` (no lattice, no redundancy pass), complete = certified with
+    no frontier edge and no deployment left (the deployer's finish)."""
     import inspect
     from coordinator.planner import Snapshot, plan_cycle
 
-    reps = sw.reports()
     snap = Snapshot(occupant={i: i for i in reps}, nbrs={i: r["neighbours"] for i, r in reps.items()},
                     contact={i: r["touch_bearing"] for i, r in reps.items() if r["touch"]},
                     kinds={i: "holonomic" for i in reps}, sources=[0],
