@@ -4,8 +4,8 @@ The criterion (the only one: :func:`certify` decides it, :func:`verify_certifica
 checks it). The *target* is a set of edges z_raw: a Fence's one-sided fence edges
 (``Fence.z_raw``) or an explicit edge set. Its *closure zone* S is, for a Fence, every
 edge outside z_raw with both ends within one hop of an odd-degree vertex of z_raw, and
-every edge of z_raw at an odd vertex (empty when z_raw is a cycle, and always empty for
-an explicit edge set). The target is *certified* when z_raw is not empty and a set of
+every fold edge of z_raw at an odd vertex, i.e. one with two or more triangles (empty when
+z_raw is a cycle, and always empty for an explicit edge set). The target is *certified* when z_raw is not empty and a set of
 triangles alpha (the chain) and a set f of zone edges (the closure) satisfy
 boundary(alpha) = z_raw + f over GF(2); z = z_raw + f is the certificate's cycle (an f
 edge in z_raw leaves it). Otherwise it is *refused*, with an obstruction: a cocycle
@@ -185,7 +185,9 @@ def _target(cx: Complex, target, where: str) -> tuple[np.ndarray, bool]:
 def closure_zone(cx: Complex, z_raw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(odd vertices (local indices), zone edge ids) of a target edge mask: the edges
     outside z_raw with both ends within one hop of an odd-degree vertex of z_raw, and the
-    edges of z_raw at an odd vertex (a closure may drop those: module docstring)."""
+    fold edges of z_raw at an odd vertex: those with two or more triangles (a one-sided
+    edge's triangles all lie on its one side, so they overlap there). A closure may drop
+    only those (module docstring); an edge with one triangle never leaves the target."""
     if not z_raw.any():
         return _EMPTY, _EMPTY
     odd = (np.bincount(cx.edges[z_raw].ravel(), minlength=cx.n) & 1).astype(bool)
@@ -195,7 +197,9 @@ def closure_zone(cx: Complex, z_raw: np.ndarray) -> tuple[np.ndarray, np.ndarray
     near = odd.copy()
     near[v[odd[u]]] = True
     near[u[odd[v]]] = True
-    return np.nonzero(odd)[0], np.nonzero((near[u] & near[v] & ~z_raw) | (z_raw & (odd[u] | odd[v])))[0]
+    fold = np.diff(cx.edge_triangles[0]) >= 2
+    return np.nonzero(odd)[0], np.nonzero((near[u] & near[v] & ~z_raw)
+                                          | (z_raw & fold & (odd[u] | odd[v])))[0]
 
 
 def boundary_of(cx: Complex, chain) -> np.ndarray:
@@ -686,7 +690,7 @@ def certify(cx: Complex, fence, *, seed: int | None = None) -> Certificate:
     if hint is not None and len(hint) and np.all(in_zone[np.asarray(hint, dtype=_I64)]):
         z1 = zr.copy()
         z1[np.asarray(hint, dtype=_I64)] ^= True
-        if not (np.bincount(cx.edges[z1].ravel(), minlength=cx.n) & 1).any():
+        if z1.any() and not (np.bincount(cx.edges[z1].ravel(), minlength=cx.n) & 1).any():
             chain, _ = S.solve(z1)
             if chain is not None:
                 _check(cx, chain, z1)
@@ -694,6 +698,9 @@ def certify(cx: Complex, fence, *, seed: int | None = None) -> Certificate:
                 stats["closure_dropped"] = int(zr[np.asarray(hint, dtype=_I64)].sum())
                 return result(True, z1, chain, closure=np.asarray(hint, dtype=_I64))
     f, psi = S.closure(zr, odd, zone)
+    if f is not None and not (zr ^ f).any():  # a closure never certifies nothing
+        stats["reason"] = "the closure empties the target"
+        return result(False, zr)
     if f is not None:
         z2 = zr ^ f
         chain, _ = S.solve(z2)

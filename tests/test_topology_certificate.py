@@ -753,3 +753,21 @@ def test_a_fold_of_overlapping_triangles_is_closed_by_dropping_its_shared_edge()
     # the closure must stay in the zone: without the dropped edges' freedom (a closure
     # outside z_raw only) the same chain is no certificate of the raw edges
     assert not verify_certificate(cx, replace(cert, closure=np.array(sorted(z - rset))), fence)
+
+
+def test_a_closure_never_drops_an_edge_with_one_triangle():
+    """Two sides of a square's triangle as the target (odd at their far ends): dropping
+    both would leave nothing, a certificate from nothing (the forged-Complex re-check of
+    tests/test_run_report.py hit it). Only fold edges (two or more triangles) may leave the
+    target: the closure adds the diagonal instead."""
+    from coordinator.complex import Complex as TopoComplex
+    ids = np.arange(4)
+    edges = np.array([[0, 1], [0, 2], [1, 2], [1, 3], [2, 3]])
+    tris = np.array([[0, 1, 2], [1, 2, 3]])
+    cx = TopoComplex(ids, edges, tris, np.zeros((5, 2)), np.zeros(4, bool), np.full(4, np.nan))
+    cert = certify(cx, SimpleNamespace(z_raw=np.array([0, 1])))
+    assert cert.certified
+    z = set(np.asarray(cert.z).tolist())
+    assert {0, 1} <= z and z == {0, 1, 2}                  # 0-1, 0-2 and the diagonal
+    _, zone = closure_zone(cx, np.isin(np.arange(5), [0, 1]))
+    assert not {0, 1} & set(zone.tolist())                 # one triangle each: not droppable
