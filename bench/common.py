@@ -56,7 +56,10 @@ def stop_all(procs, grace_s: float = 10.0) -> None:
 
 def starter(procs: list, env=None, cwd=None):
     """A function that starts argv as a child (stdout a text pipe, stderr and stdin
-    closed) and appends it to ``procs``, for :func:`stop_all`."""
+    closed) and appends it to ``procs``, for :func:`stop_all`. The children stop if this
+    process dies first (SWARMCOVER_WATCH_PARENT)."""
+    env = dict(os.environ if env is None else env, SWARMCOVER_WATCH_PARENT="1")
+
     def start(argv):
         p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                              stdin=subprocess.DEVNULL, text=True, env=env, cwd=cwd)

@@ -31,6 +31,9 @@ class Proc:
         # the exit watchdog (bus.session.Shutdown) must fire inside the tests' 15 s waits,
         # not at them: a fake-robot once outlived SIGINT by 15 s in CI with the 15 s default
         e.setdefault("SWARMCOVER_EXIT_GRACE_S", "12")
+        # a child stops when the test process dies without its teardown (pytest killed by a
+        # signal or a CI timeout): a router of test_lab_security outlived a SIGTERMed run
+        e.setdefault("SWARMCOVER_WATCH_PARENT", "1")
         e.update(env or {})
         self.p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                   stdin=subprocess.DEVNULL, text=True, env=e,

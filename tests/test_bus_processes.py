@@ -207,3 +207,44 @@ def test_run_node_hands_what_prepare_built_to_serve(router):
     assert run_node("t", None, lambda p: None, serve, argv=["--connect", dead],
                     prepare=bad) == 2
     assert len(seen) == 1
+
+
+_DIES_WITH_A_ROUTER = """
+import sys, time
+sys.path.insert(0, sys.argv[1])
+from procs import Proc, SWARMCOVER
+r = Proc(SWARMCOVER + ["router", "--listen", sys.argv[2]])
+r.wait_line("READY router", timeout=20)
+print("ROUTER", r.pid, flush=True)
+time.sleep(120)
+"""
+
+
+def _running(pid: int) -> bool:
+    """pid exists and is not a zombie."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_children_of_a_killed_test_process_stop_too(procs):
+    """A test process killed without its teardown (SIGKILL, a CI timeout) leaves no child:
+    tests/procs.Proc starts children watching their parent (SWARMCOVER_WATCH_PARENT). A
+    router of test_lab_security once outlived a SIGTERMed pytest by an hour."""
+    import os
+    import sys
+    from pathlib import Path
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    holder = procs.start([sys.executable, "-c", _DIES_WITH_A_ROUTER,
+                          str(Path(__file__).resolve().parent), ep])
+    pid = int(holder.wait_line("ROUTER", timeout=30).split()[1])
+    holder.signal(signal.SIGKILL)
+    end = time.monotonic() + 10
+    while time.monotonic() < end and _running(pid):
+        time.sleep(0.1)
+    alive = _running(pid)
+    if alive:
+        os.kill(pid, signal.SIGKILL)
+    assert not alive, "the router outlived the process that started it"
