@@ -22,6 +22,8 @@ import textwrap
 import tokenize
 from dataclasses import dataclass
 
+from ground.toml import dumps_toml, toml_value
+
 # --------------------------------------------------------------------------- doc table
 # (unit, explanation) for fields whose class has no inline comment, and units everywhere
 # the name does not say them. "x rv": a multiple of the visibility radius.
@@ -271,22 +273,6 @@ def sections() -> list[Section]:
 
 # --------------------------------------------------------------------------- writers
 
-def _toml_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, float):
-        return repr(v)
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{" + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items()) + "}"
-    raise TypeError(f"no TOML for {v!r}")
-
-
 def defaults_toml() -> str:
     """A complete, commented run config with every default (valid as it is)."""
     out = ["# swarmcover run config: every section and field, with its unit and default.",
@@ -304,7 +290,7 @@ def defaults_toml() -> str:
                 out.append("# Only for runs with live robots: uncomment, and add one "
                            "[[hwbridge.robots]] per robot.")
             out.append(f"{pre}[[{sec.name}]]" if sec.array else f"{pre}[{sec.name}]")
-        width = max(len(f"{f.name} = {_toml_value(f.default)}") for f in sec.fields
+        width = max(len(f"{f.name} = {toml_value(f.default)}") for f in sec.fields
                     if f.default is not None) if sec.fields else 0
         width = min(width, 34)
         for f in sec.fields:
@@ -315,7 +301,7 @@ def defaults_toml() -> str:
                 line = f"# {f.name} = {example}"
                 note += "; no default"
             else:
-                line = f"{f.name} = {_toml_value(f.default)}"
+                line = f"{f.name} = {toml_value(f.default)}"
             if len(line) + len(note) > 86:  # a long explanation goes above its field
                 out += [f"{pre}# {w}" for w in textwrap.wrap(note, 84)]
                 out.append(f"{pre}{line}")
@@ -339,7 +325,7 @@ def docs_markdown() -> str:
         out += [f"## {title}", "", sec.doc[0].upper() + sec.doc[1:] + ".", "",
                 "| field | default | unit | meaning |", "|---|---|---|---|"]
         for f in sec.fields:
-            d = "(none)" if f.default is None else f"`{_toml_value(f.default)}`"
+            d = "(none)" if f.default is None else f"`{toml_value(f.default)}`"
             doc = f.doc.replace("|", "\\|")
             out.append(f"| `{f.name}` | {d} | {f.unit} | {doc} |")
         out.append("")
@@ -354,7 +340,6 @@ def complete_resolved_toml(text: str, path: str = "<resolved>") -> str:
 
     from agents.params import from_config
     from coordinator.config import CoordinatorConfig
-    from world.config import dumps_toml
     raw = tomllib.loads(text)
     agent = from_config(raw, path)
     coord = CoordinatorConfig.from_section(raw.get("coordinator"), raw.get("rv", 1.0), path)

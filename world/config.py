@@ -25,6 +25,7 @@ from typing import Any
 # one style for every section (ConfigError is re-exported for the world's callers)
 from bus.configcheck import Checker, ConfigError
 from bus.messages import ROBOT_KINDS  # the wire's list, the one copy
+from ground.toml import dumps_toml  # noqa: F401  (re-exported: configref, tests)
 
 MODES = ("lockstep", "realtime")
 WORLD_SECTIONS = ("map", "robots", "sensing", "world")
@@ -410,66 +411,3 @@ def to_dict(cfg: RunConfig) -> dict:
 def to_toml(cfg: RunConfig) -> str:
     """The resolved config as TOML text (round-trips through loads_config)."""
     return dumps_toml(to_dict(cfg))
-
-
-def _toml_key(k: str) -> str:
-    if k and all(c.isalnum() or c in "_-" for c in k):
-        return k
-    return _toml_value(str(k))
-
-
-def _toml_value(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, float):
-        if math.isnan(v):
-            return "nan"
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        return repr(v)
-    if isinstance(v, str):
-        out = ['"']
-        for c in v:
-            if c == '"':
-                out.append('\\"')
-            elif c == "\\":
-                out.append("\\\\")
-            elif c == "\n":
-                out.append("\\n")
-            elif c == "\t":
-                out.append("\\t")
-            elif ord(c) < 0x20 or ord(c) == 0x7F:
-                out.append(f"\\u{ord(c):04x}")
-            else:
-                out.append(c)
-        out.append('"')
-        return "".join(out)
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{" + ", ".join(f"{_toml_key(k)} = {_toml_value(x)}" for k, x in v.items()) + "}"
-    if v is None:
-        raise ValueError("TOML has no null")
-    if hasattr(v, "isoformat"):
-        return v.isoformat()
-    raise ValueError(f"cannot write {type(v).__name__} as TOML")
-
-
-def dumps_toml(d: dict, _prefix: str = "") -> str:
-    """A small TOML writer: scalars and arrays inline, nested tables as [a.b] headers."""
-    lines, tables = [], []
-    for k, v in d.items():
-        if v is None:
-            continue
-        if isinstance(v, dict):
-            tables.append((k, v))
-        else:
-            lines.append(f"{_toml_key(k)} = {_toml_value(v)}")
-    out = "\n".join(lines)
-    for k, v in tables:
-        name = f"{_prefix}.{_toml_key(k)}" if _prefix else _toml_key(k)
-        body = dumps_toml(v, name)
-        out += ("\n\n" if out else "") + f"[{name}]" + ("\n" + body if body else "")
-    return out + ("\n" if not _prefix else "")
