@@ -23,7 +23,6 @@ import argparse
 import json
 import math
 import os
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -31,7 +30,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from bench.common import CLK, cpu_seconds, eprint, free_port, stop_all, wait_line  # noqa: E402
+from bench.common import CLK, cpu_seconds, eprint, router_and_starter, wait_line  # noqa: E402
 
 
 # --------------------------------------------------------------------------- echo process
@@ -186,73 +185,62 @@ def main(argv=None) -> int:
     from bus.messages import Task
     from bus.session import Mailbox, add_zenoh_args, open_session
 
-    ep = f"tcp/127.0.0.1:{free_port()}"
     swarm = f"bench{os.getpid()}"
     py = sys.executable
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    procs = []
-
-    def start(argv_):
-        p = subprocess.Popen(argv_, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                             stdin=subprocess.DEVNULL, text=True, env=env, cwd=str(ROOT))
-        procs.append(p)
-        return p
-
     result: dict = {"bench": "agent"}
     session = None
-    try:
-        router = start([py, "-m", "swarmcover", "router", "--listen", ep])
-        wait_line(router, "READY router")
-        z = ["--connect", ep, "--swarm", swarm]
-        agent = start([py, "-m", "swarmcover", "agent", "--id", "0", "--info-timeout", "0",
-                       "--log-level", "WARNING", *z])
-        echo = start([py, str(Path(__file__).resolve()), "--echo", "--id", "1", *z])
-        wait_line(agent, "READY agent")
-        wait_line(echo, "READY echo")
-        eprint("router, agent and echo are up")
-        ap2 = argparse.ArgumentParser()
-        add_zenoh_args(ap2)
-        session = open_session(ap2.parse_args(z))
-        keys = Keys(swarm)
-        mb = Mailbox()
-        subs = [session.declare_subscriber(keys.cmd_vel(r), mb.callback) for r in (0, 1)]
-        model = Model()
-        time.sleep(0.5)
-        session.put(keys.task(0), Task(task_id=1, robot=0, kind="hold").encode())
-        tick, t = drive(session, keys, mb, model, 50, 0, 0.0, 0)  # warm up
-        phases = {}
-        for name, goto_every in (("hold", 0), ("goto", 60)):
-            if name == "hold":
-                session.put(keys.task(0), Task(task_id=2, robot=0, kind="hold").encode())
-                tick, t = drive(session, keys, mb, model, 20, 0, t, tick)
-            a0, e0, w0 = cpu_seconds(agent.pid), cpu_seconds(echo.pid), time.monotonic()
-            tick, t = drive(session, keys, mb, model, args.burst, 0, t, tick, goto_every)
-            a1, e1, w1 = cpu_seconds(agent.pid), cpu_seconds(echo.pid), time.monotonic()
-            burst = {"messages": args.burst, "wall_s": round(w1 - w0, 3),
-                     "agent_ms_per_msg": round(1e3 * (a1 - a0) / args.burst, 4),
-                     "echo_ms_per_msg": round(1e3 * (e1 - e0) / args.burst, 4)}
-            burst["ratio_agent_over_echo"] = round((a1 - a0) / max(e1 - e0, 1e-9), 3)
-            eprint(f"{name} burst: {burst}")
-            n20 = int(args.rate_s * 20)
-            a0, e0, w0 = cpu_seconds(agent.pid), cpu_seconds(echo.pid), time.monotonic()
-            tick, t = drive(session, keys, mb, model, n20, 20, t, tick, goto_every)
-            a1, e1, w1 = cpu_seconds(agent.pid), cpu_seconds(echo.pid), time.monotonic()
-            at20 = {"seconds": round(w1 - w0, 2),
-                    "agent_core_pct": round(100 * (a1 - a0) / (w1 - w0), 2),
-                    "echo_core_pct": round(100 * (e1 - e0) / (w1 - w0), 2)}
-            at20["ratio_agent_over_echo"] = round((a1 - a0) / max(e1 - e0, 1e-9), 3)
-            eprint(f"{name} at 20 Hz: {at20}")
-            phases[name] = {"burst": burst, "rate_20hz": at20}
-        for s_ in subs:
-            s_.undeclare()
-        result.update(phases=phases, budget_core_pct_at_20hz=2.0,
-                      within_budget=all(p["rate_20hz"]["agent_core_pct"] <= 2.0
-                                        for p in phases.values()),
-                      cpu_clock_tick_s=1.0 / CLK)
-    finally:
-        if session is not None:
-            session.close()
-        stop_all(procs)
+    with router_and_starter(py, env, str(ROOT)) as (start, ep, _):
+        try:
+            z = ["--connect", ep, "--swarm", swarm]
+            agent = start([py, "-m", "swarmcover", "agent", "--id", "0", "--info-timeout", "0",
+                           "--log-level", "WARNING", *z])
+            echo = start([py, str(Path(__file__).resolve()), "--echo", "--id", "1", *z])
+            wait_line(agent, "READY agent")
+            wait_line(echo, "READY echo")
+            eprint("router, agent and echo are up")
+            ap2 = argparse.ArgumentParser()
+            add_zenoh_args(ap2)
+            session = open_session(ap2.parse_args(z))
+            keys = Keys(swarm)
+            mb = Mailbox()
+            subs = [session.declare_subscriber(keys.cmd_vel(r), mb.callback) for r in (0, 1)]
+            model = Model()
+            time.sleep(0.5)
+            session.put(keys.task(0), Task(task_id=1, robot=0, kind="hold").encode())
+            tick, t = drive(session, keys, mb, model, 50, 0, 0.0, 0)  # warm up
+            phases = {}
+            for name, goto_every in (("hold", 0), ("goto", 60)):
+                if name == "hold":
+                    session.put(keys.task(0), Task(task_id=2, robot=0, kind="hold").encode())
+                    tick, t = drive(session, keys, mb, model, 20, 0, t, tick)
+                a0, e0, w0 = cpu_seconds(agent.pid), cpu_seconds(echo.pid), time.monotonic()
+                tick, t = drive(session, keys, mb, model, args.burst, 0, t, tick, goto_every)
+                a1, e1, w1 = cpu_seconds(agent.pid), cpu_seconds(echo.pid), time.monotonic()
+                burst = {"messages": args.burst, "wall_s": round(w1 - w0, 3),
+                         "agent_ms_per_msg": round(1e3 * (a1 - a0) / args.burst, 4),
+                         "echo_ms_per_msg": round(1e3 * (e1 - e0) / args.burst, 4)}
+                burst["ratio_agent_over_echo"] = round((a1 - a0) / max(e1 - e0, 1e-9), 3)
+                eprint(f"{name} burst: {burst}")
+                n20 = int(args.rate_s * 20)
+                a0, e0, w0 = cpu_seconds(agent.pid), cpu_seconds(echo.pid), time.monotonic()
+                tick, t = drive(session, keys, mb, model, n20, 20, t, tick, goto_every)
+                a1, e1, w1 = cpu_seconds(agent.pid), cpu_seconds(echo.pid), time.monotonic()
+                at20 = {"seconds": round(w1 - w0, 2),
+                        "agent_core_pct": round(100 * (a1 - a0) / (w1 - w0), 2),
+                        "echo_core_pct": round(100 * (e1 - e0) / (w1 - w0), 2)}
+                at20["ratio_agent_over_echo"] = round((a1 - a0) / max(e1 - e0, 1e-9), 3)
+                eprint(f"{name} at 20 Hz: {at20}")
+                phases[name] = {"burst": burst, "rate_20hz": at20}
+            for s_ in subs:
+                s_.undeclare()
+            result.update(phases=phases, budget_core_pct_at_20hz=2.0,
+                          within_budget=all(p["rate_20hz"]["agent_core_pct"] <= 2.0
+                                            for p in phases.values()),
+                          cpu_clock_tick_s=1.0 / CLK)
+        finally:
+            if session is not None:
+                session.close()
     if args.split_n > 0:
         result["split"] = sp = split(args.split_n)
         for name, ph in sp.items():

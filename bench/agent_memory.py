@@ -49,7 +49,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from bench.common import eprint, free_port, starter, stop_all, wait_line  # noqa: E402
+from bench.common import eprint, router_and_starter, wait_line  # noqa: E402
 
 HEAVY = ("numpy", "scipy", "pymunk", "matplotlib", "PIL", "shapely", "networkx")
 
@@ -134,13 +134,7 @@ time.sleep(600)
 
 def floor(py: str, env: dict, settle_s: float) -> dict:
     """USS/PSS of a sleeping bare interpreter and of one holding only a Zenoh session."""
-    ep = f"tcp/127.0.0.1:{free_port()}"
-    procs: list[subprocess.Popen] = []
-    start = starter(procs, env, str(ROOT))
-
-    try:
-        router = start([py, "-m", "swarmcover", "router", "--listen", ep])
-        wait_line(router, "READY router")
+    with router_and_starter(py, env, str(ROOT)) as (start, ep, _):
         bare = start([py, "-c", "print('READY bare', flush=True); import time; time.sleep(600)"])
         sess = start([py, "-c", _SESSION_ONLY, "--connect", ep, "--swarm", f"floor{os.getpid()}"])
         wait_line(bare, "READY bare")
@@ -150,21 +144,13 @@ def floor(py: str, env: dict, settle_s: float) -> dict:
         for name, p in (("bare_interpreter", bare), ("zenoh_session_only", sess)):
             m = memory_mb(p.pid)
             out[name] = {k: round(m[k], 2) for k in ("rss", "pss", "uss")}
-    finally:
-        stop_all(procs)
     return out
 
 
 def measure(n: int, py: str, env: dict, run_config: str, settle_s: float) -> dict:
     """Start a router and n agents, let them idle, read their memory; stop them all."""
-    ep = f"tcp/127.0.0.1:{free_port()}"
     swarm = f"mem{os.getpid()}n{n}"
-    procs: list[subprocess.Popen] = []
-    start = starter(procs, env, str(ROOT))
-
-    try:
-        router = start([py, "-m", "swarmcover", "router", "--listen", ep])
-        wait_line(router, "READY router")
+    with router_and_starter(py, env, str(ROOT)) as (start, ep, router):
         how = ["--run-config", run_config] if run_config else ["--info-timeout", "0"]
         agents = [start([py, "-m", "swarmcover", "agent", "--id", str(k), "--log-level",
                          "WARNING", "--connect", ep, "--swarm", swarm, *how])
@@ -176,8 +162,6 @@ def measure(n: int, py: str, env: dict, run_config: str, settle_s: float) -> dic
         router_mb = memory_mb(router.pid)
         heavy = sorted({h for a in agents for h in heavy_mapped(a.pid)})
         threads = len(os.listdir(f"/proc/{agents[0].pid}/task"))
-    finally:
-        stop_all(procs)
     res = {"agents": n, "heavy_mapped": heavy, "threads_per_agent": threads}
     for k in ("rss", "pss", "uss", "pss_anon", "pss_file"):
         res[f"{k}_mb_per_agent"] = round(statistics.mean(x[k] for x in per), 2)

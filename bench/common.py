@@ -1,9 +1,11 @@
 """What the benchmarks that start real processes share: progress on stderr, a free port,
-a process's CPU time, waiting for a line of a child's stdout, stopping children."""
+a process's CPU time, waiting for a line of a child's stdout, starting and stopping
+children, a router to start them against."""
 from __future__ import annotations
 
 import os
 import socket
+from contextlib import contextmanager
 import subprocess
 import sys
 import time
@@ -66,3 +68,19 @@ def starter(procs: list, env=None, cwd=None):
         procs.append(p)
         return p
     return start
+
+
+@contextmanager
+def router_and_starter(py: str | None = None, env=None, cwd=None):
+    """A ``swarmcover router`` on a free loopback port, and a :func:`starter` for more
+    children: yields ``(start, endpoint, router)``; every child (the router last) is stopped
+    on the way out, whatever happened."""
+    procs: list = []
+    start = starter(procs, env, cwd)
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    try:
+        router = start([py or sys.executable, "-m", "swarmcover", "router", "--listen", ep])
+        wait_line(router, "READY router")
+        yield start, ep, router
+    finally:
+        stop_all(procs)
