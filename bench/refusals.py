@@ -297,11 +297,7 @@ def run_one(args) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--maps", type=int, default=500)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--jobs", type=int, default=1)
-    ap.add_argument("--only", type=int, nargs="*")
-    ap.add_argument("--out")
+    truth.add_campaign_args(ap)
     a = ap.parse_args(argv)
     kw = {}
     idx = a.only if a.only else list(range(a.maps))

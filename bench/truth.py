@@ -676,16 +676,21 @@ def campaign(maps: int, seed: int, jobs: int = 1, progress=True, partial: str | 
     return rows
 
 
+def add_campaign_args(ap: argparse.ArgumentParser) -> None:
+    """The flags every campaign over these maps takes (this bench, bench/refusals.py)."""
+    ap.add_argument("--maps", type=int, default=500, help="maps 0 .. N-1 of the seed's sequence")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--jobs", type=int, default=1, help="worker processes")
+    ap.add_argument("--only", type=int, nargs="*", help="run only these map indices")
+    ap.add_argument("--out", help="write every map's result and the summary as JSON")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--maps", type=int, default=500)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--jobs", type=int, default=1)
+    add_campaign_args(ap)
     ap.add_argument("--per-cycle", type=int, default=8, help="pushes per cycle (default 8, the deployer's max_paths)")
     ap.add_argument("--headings", choices=("zero", "random"), default="zero",
                     help="robot body headings: zero (holonomic, parallel frames) or random")
-    ap.add_argument("--only", type=int, nargs="*", help="run only these map indices")
-    ap.add_argument("--out", help="write every map's result and the summary as JSON")
     ap.add_argument("--door-min-rv", type=float, default=None,
                     help="[coordinator] door_min_rv for the probes (default: the config's)")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
