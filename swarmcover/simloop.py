@@ -51,11 +51,11 @@ class SimLoop:
     def __init__(self, cfg, *, seed: int | None = None, coordinator_overrides: dict | None = None,
                  status_every: int | None = None):
         from agents.behaviours import Behaviour
-        from agents.params import from_toml_text
+        from agents.params import from_config
         from coordinator.config import CoordinatorConfig
         from coordinator.deployer import Deployer
         from coordinator.node import robot_kinds_from_config
-        from world.config import to_toml
+        from world.config import to_dict
         from world.maps import build_map
         from world.node import join_ticks
         from world.physics import Physics
@@ -75,8 +75,9 @@ class SimLoop:
                                robots_occlude=sc.robots_occlude, n_touch=sc.n_touch,
                                skin=sc.touch_skin, rng=self.rng)
         self.sense_every = max(1, round(1.0 / (sc.rate_hz * w.dt)))
-        # the agent processes read the resolved config's text (run --run-config): so does this
-        self.agent_params = from_toml_text(to_toml(cfg), str(cfg.path))
+        # the agent processes read the resolved config's text (run --run-config), which is
+        # this dict as TOML (tests/test_agent_params.py checks the two agree on every config)
+        self.agent_params = from_config(to_dict(cfg), str(cfg.path))
         self._Behaviour = Behaviour
         section = dict(cfg.section("coordinator"))
         section.update(coordinator_overrides or {})

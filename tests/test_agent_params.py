@@ -52,3 +52,17 @@ def test_cli_overrides():
     with pytest.raises(ParamError, match="arrive_ticks = 0: must be >= 1"):
         parse_override("arrive_ticks=0", p)
     assert from_config({}, "x") == AgentParams()
+
+
+def test_the_inproc_loop_and_an_agent_process_read_the_same_params():
+    """swarmcover.simloop takes the agents' parameters from the resolved config as a dict;
+    an agent process (run --run-config) parses the same config written as resolved.toml.
+    On every shipped config the two must agree (issue 17: one runtime)."""
+    from pathlib import Path
+
+    from world.config import load_config, to_dict, to_toml
+    paths = sorted((Path(__file__).resolve().parent.parent / "configs").glob("*.toml"))
+    assert len(paths) >= 8
+    for path in paths:
+        cfg = load_config(str(path))
+        assert from_config(to_dict(cfg), str(path)) == from_toml_text(to_toml(cfg), str(path)), path
