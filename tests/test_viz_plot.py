@@ -9,7 +9,7 @@ from PIL import Image
 
 from bus.keys import Keys
 from swarmcover.record import McapSink
-from viz import plot
+from swarmcover import plot
 from viz.synth import Scenario
 
 

@@ -18,7 +18,7 @@ from PIL import Image
 from bus.keys import Keys
 from procs import client_session, free_port
 from viz.synth import Scenario
-from viz.view import LiveState, Snapshot, map_json, render_page
+from swarmcover.view import LiveState, Snapshot, map_json, render_page
 
 SYNTH = [sys.executable, "-m", "viz.synth"]
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")

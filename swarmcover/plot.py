@@ -223,8 +223,8 @@ def make_plots(path: str | Path, out: str | Path | None = None, *, cycles: list[
     """Everything ``swarmcover plot`` writes; returns the written paths."""
     from swarmcover.progress import Progress
 
-    from .coverage import coverage_measure
-    from .figures import render_progress, render_snapshot, snapshot_image, write_gif
+    from viz.coverage import coverage_measure
+    from viz.figures import render_progress, render_snapshot, snapshot_image, write_gif
 
     run = load_run(path, progress=progress)
     cov_fn, cov_label = coverage_measure("none" if run.info.name == NO_MAP else coverage)
@@ -278,7 +278,7 @@ def make_plots(path: str | Path, out: str | Path | None = None, *, cycles: list[
 def main(argv: list[str] | None = None) -> int:
     from bus.session import setup_logging
 
-    from .coverage import KINDS
+    from viz.coverage import KINDS
 
     p = argparse.ArgumentParser(prog="swarmcover plot", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -40,11 +40,12 @@ from pathlib import Path
 from bus import messages as m
 from bus.keys import Keys
 
-from .coverage import coverage_measure, map_bounds, polygon_xy
-from .geometry import build_scene
+import viz as _viz
+from viz.coverage import coverage_measure, map_bounds, polygon_xy
+from viz.geometry import build_scene
 
 log = logging.getLogger("swarmcover.view")
-PAGE = Path(__file__).with_name("static") / "view.html"
+PAGE = Path(_viz.__file__).with_name("static") / "view.html"  # package data of viz
 _ROLES = ("world", "coordinator", "hwbridge")
 
 
@@ -429,7 +430,7 @@ class ViewServer:
 
 
 def _args(p: argparse.ArgumentParser) -> None:
-    from .coverage import KINDS
+    from viz.coverage import KINDS
     p.add_argument("--port", type=int, default=8765, help="HTTP port (default 8765; 0 = any free)")
     p.add_argument("--host", default="127.0.0.1",
                    help="address to serve on (default 127.0.0.1: this machine only)")

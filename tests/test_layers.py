@@ -1,0 +1,43 @@
+"""The house's floors import downwards only (issue 17): the pure cores and the drawing
+library never import the process layer. Read from the source (ast), so a new import that
+breaks a floor fails here, not in a user's import cycle."""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+# package -> packages it must never import (at any depth, lazily inside functions too)
+NEVER = {
+    "ground": {"agents", "bus", "coordinator", "hwbridge", "swarmcover", "viz", "world"},
+    "viz": {"swarmcover", "coordinator", "agents", "hwbridge"},
+}
+
+
+def _imported_packages(path: Path) -> set[str]:
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            out |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            out.add(node.module.split(".")[0])
+    return out
+
+
+def test_lower_floors_never_import_upper_ones():
+    bad = []
+    for pkg, never in NEVER.items():
+        files = sorted((ROOT / pkg).rglob("*.py"))
+        assert files, pkg
+        for path in files:
+            hit = _imported_packages(path) & never
+            if hit:
+                bad.append(f"{path.relative_to(ROOT)} imports {sorted(hit)}")
+    assert not bad, "; ".join(bad)
+
+
+def test_the_check_sees_an_import_inside_a_function(tmp_path):
+    f = tmp_path / "m.py"
+    f.write_text("def g():\n    from swarmcover.replay import read_messages\n")
+    assert "swarmcover" in _imported_packages(f)
