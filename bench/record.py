@@ -6,7 +6,7 @@
    to (a) a bare Mailbox subscriber that only enqueues (the floor of Zenoh delivery into
    Python) and (b) a ``Recorder`` on the same key space; throughput of each until the
    last message is delivered / written.
-3. plot load: ``viz.plot.load_run`` over a recording vs ``replay.read_messages`` alone.
+3. plot load: ``swarmcover.plot.load_run`` over a recording vs ``replay.read_messages`` alone.
 4. writers: the same JSON messages plus foxglove.SceneUpdates written with the ``mcap``
    package's Writer (what McapSink uses) vs foxglove-sdk's own MCAP writer (Rust), and the
    share of a recording's time the scene costs; also the JSON format vs the old msgpack
@@ -146,7 +146,7 @@ def bench_recorder(items, keys: Keys, tmp: Path) -> dict:
 def bench_plot_load(tmp: Path, cycles: int = 200) -> dict:
     from swarmcover.record import McapSink
     from swarmcover.replay import read_messages
-    from viz.plot import load_run
+    from swarmcover.plot import load_run
     from viz.synth import Scenario
     k = Keys("bench")
     sc = Scenario(n_max=60)
