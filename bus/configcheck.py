@@ -16,6 +16,8 @@ import dataclasses
 import math
 from typing import Any, Iterable, Mapping
 
+from ground.geometry import signed_area
+
 # numpy is imported inside the polygon check only (self_crossing and its helpers): agents
 # import this module for their [agent] section and must not pay for numpy (issue 18).
 
@@ -108,7 +110,7 @@ class Checker:
             i, j = bad
             raise self.err(name, v, f"not a simple polygon: edge {i} ({i}-{(i + 1) % len(pts)}) "
                                     f"meets edge {j} ({j}-{(j + 1) % len(pts)})")
-        if abs(polygon_signed_area(pts)) < 1e-12:
+        if abs(signed_area(pts)) < 1e-12:
             raise self.err(name, v, "polygon has zero area")
         return pts
 
@@ -123,16 +125,6 @@ class Checker:
 
 
 # --------------------------------------------------------------------------- geometry
-
-def polygon_signed_area(pts) -> float:
-    s = 0.0
-    n = len(pts)
-    for k in range(n):
-        x0, y0 = pts[k]
-        x1, y1 = pts[(k + 1) % n]
-        s += x0 * y1 - x1 * y0
-    return 0.5 * s
-
 
 def self_crossing(pts, chunk: int = 256) -> tuple[int, int] | None:
     """A pair (i, j), i < j, of non-adjacent edges of the closed ring ``pts`` that meet

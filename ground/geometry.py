@@ -6,12 +6,14 @@ polygon given as its vertices ``[[x, y], ...]`` (the last vertex joins the first
 """
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Iterable, Sequence
 
 if TYPE_CHECKING:  # numpy is imported by the array functions only (see ground/__init__.py)
     import numpy as np
 
-__all__ = ["flat_to_points", "rings_to_segments"]
+__all__ = ["edge_distance", "flat_to_points", "point_in_polygon", "rings_to_segments",
+           "signed_area"]
 
 
 def flat_to_points(flat: Sequence[float]) -> tuple[tuple[float, float], ...]:
@@ -35,3 +37,45 @@ def rings_to_segments(rings: Iterable[Sequence[Sequence[float]]]) -> np.ndarray:
     w = np.concatenate(segs, 0)
     keep = (w[:, 0] != w[:, 2]) | (w[:, 1] != w[:, 3])
     return np.ascontiguousarray(w[keep])
+
+
+# scalar forms, pure Python: one point against one polygon (the bridge's geofence at its
+# command rate, config checks). world/maps.py keeps the vectorised forms for rasters.
+
+def signed_area(pts: Sequence[Sequence[float]]) -> float:
+    """Shoelace area of the closed ring ``pts`` (m^2): positive counter-clockwise."""
+    s = 0.0
+    n = len(pts)
+    for k in range(n):
+        x0, y0 = pts[k]
+        x1, y1 = pts[(k + 1) % n]
+        s += x0 * y1 - x1 * y0
+    return 0.5 * s
+
+
+def point_in_polygon(x: float, y: float, poly: Sequence[Sequence[float]]) -> bool:
+    """Even-odd rule; points exactly on an edge may fall either way."""
+    inside = False
+    n = len(poly)
+    for i in range(n):
+        x1, y1 = poly[i]
+        x2, y2 = poly[(i + 1) % n]
+        if (y1 > y) != (y2 > y):
+            xc = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
+            if x < xc:
+                inside = not inside
+    return inside
+
+
+def edge_distance(x: float, y: float, poly: Sequence[Sequence[float]]) -> float:
+    """Distance (m) from (x, y) to the nearest edge of the closed ring ``poly``."""
+    best = math.inf
+    n = len(poly)
+    for i in range(n):
+        x1, y1 = poly[i]
+        x2, y2 = poly[(i + 1) % n]
+        dx, dy = x2 - x1, y2 - y1
+        L2 = dx * dx + dy * dy
+        t = 0.0 if L2 == 0 else max(0.0, min(1.0, ((x - x1) * dx + (y - y1) * dy) / L2))
+        best = min(best, math.hypot(x - (x1 + t * dx), y - (y1 + t * dy)))
+    return best

@@ -18,6 +18,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Iterable, Sequence
 
+from ground.geometry import edge_distance, point_in_polygon  # noqa: F401  (hwbridge.node)
+
 REASONS = ("ok", "clamped", "no_command", "command_stale", "no_mocap", "mocap_stale",
            "geofence")
 
@@ -35,34 +37,6 @@ def clamp_unicycle(v: float, omega: float, v_max: float, w_max: float) -> tuple[
     if abs(omega) > w_max:
         s = min(s, w_max / abs(omega))
     return v * s, omega * s
-
-
-def point_in_polygon(x: float, y: float, poly: Sequence[tuple[float, float]]) -> bool:
-    """Even-odd rule; points exactly on an edge may fall either way."""
-    inside = False
-    n = len(poly)
-    for i in range(n):
-        x1, y1 = poly[i]
-        x2, y2 = poly[(i + 1) % n]
-        if (y1 > y) != (y2 > y):
-            xc = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
-            if x < xc:
-                inside = not inside
-    return inside
-
-
-def edge_distance(x: float, y: float, poly: Sequence[tuple[float, float]]) -> float:
-    """Distance (m) from (x, y) to the nearest edge of the polygon."""
-    best = math.inf
-    n = len(poly)
-    for i in range(n):
-        x1, y1 = poly[i]
-        x2, y2 = poly[(i + 1) % n]
-        dx, dy = x2 - x1, y2 - y1
-        L2 = dx * dx + dy * dy
-        t = 0.0 if L2 == 0 else max(0.0, min(1.0, ((x - x1) * dx + (y - y1) * dy) / L2))
-        best = min(best, math.hypot(x - (x1 + t * dx), y - (y1 + t * dy)))
-    return best
 
 
 def inside_fence(x: float, y: float, poly: Sequence[tuple[float, float]] | None,

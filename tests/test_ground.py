@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 
 import numpy as np
-from hypothesis import given, strategies as st
+from hypothesis import given, settings, strategies as st
 
 from ground.angles import PI, circmean, circular_mean, side, side_array, wrap, wrap_array
 
@@ -87,7 +87,9 @@ def test_circular_mean_of_nothing_and_of_opposites():
 # plane geometry: closed rings -> wall segments (world/maps.py and hwbridge/room.py each had
 # their own) and a WorldInfo's flat polygon -> points (hwbridge, fake-robot, scene, ros2)
 GEOMETRY_HOME = {"rings_to_segments": "ground/geometry.py", "rings_to_walls": None,
-                 "flat_to_points": "ground/geometry.py", "flat_to_polygon": None}
+                 "flat_to_points": "ground/geometry.py", "flat_to_polygon": None,
+                 "point_in_polygon": "ground/geometry.py", "edge_distance": "ground/geometry.py",
+                 "signed_area": "ground/geometry.py", "polygon_signed_area": None}
 
 
 def test_geometry_helpers_are_defined_once_in_the_ground_floor():
@@ -148,6 +150,7 @@ _values = st.recursive(_scalars, lambda inner: st.lists(inner, max_size=4)
                        | st.dictionaries(_keys, inner, max_size=3), max_leaves=8)
 
 
+@settings(deadline=None)  # a loaded CI box; the test is about values, not time
 @given(st.dictionaries(_keys, _values | st.dictionaries(_keys, _values, max_size=3),
                        max_size=5))
 def test_dumps_toml_round_trips_through_tomllib(d):
@@ -155,3 +158,24 @@ def test_dumps_toml_round_trips_through_tomllib(d):
 
     from ground.toml import dumps_toml
     assert tomllib.loads(dumps_toml(d)) == d
+
+
+@settings(deadline=None)  # the first example imports world.maps (matplotlib)
+@given(st.lists(st.tuples(st.floats(0.1, 5), st.floats(-math.pi, math.pi)), min_size=3,
+                max_size=12, unique_by=lambda p: round(p[1], 2)),
+       st.lists(st.tuples(st.floats(-6, 6), st.floats(-6, 6)), min_size=1, max_size=20))
+def test_scalar_polygon_forms_agree_with_the_world_s_array_forms(rays, points):
+    """ground.geometry's pure-Python point_in_polygon, signed_area and edge_distance (the
+    bridge's geofence, config checks) against world/maps.py's vectorised forms, on star-shaped
+    polygons (vertices sorted by angle around the origin), random points off the edges."""
+    from ground.geometry import edge_distance, point_in_polygon, rings_to_segments, signed_area
+    from world.maps import point_segment_distance, points_in_polygon, polygon_area
+    poly = [(r * math.cos(a), r * math.sin(a)) for r, a in sorted(rays, key=lambda p: p[1])]
+    assert math.isclose(abs(signed_area(poly)), polygon_area(poly), rel_tol=1e-9, abs_tol=1e-9)
+    walls = rings_to_segments([poly])
+    d = point_segment_distance(np.asarray(points), walls).min(axis=1)
+    inside = points_in_polygon(points, poly)
+    for (x, y), dk, ik in zip(points, d, inside):
+        assert math.isclose(edge_distance(x, y, poly), dk, rel_tol=1e-9, abs_tol=1e-9)
+        if dk > 1e-6:
+            assert point_in_polygon(x, y, poly) == bool(ik), (x, y)
