@@ -57,6 +57,7 @@ from bench.oracle import PolyMap  # noqa: E402
 from bench.truth import RV, Swarm, _rect  # noqa: E402
 from bus.messages import Status  # noqa: E402
 from coordinator import build_complex, certify, detect_fence, find_redundant, plan_pushes  # noqa: E402
+from coordinator.actions import SendTask  # noqa: E402
 from coordinator.config import CoordinatorConfig  # noqa: E402
 from coordinator.deployer import Deployer  # noqa: E402
 from coordinator.planner import (  # noqa: E402
@@ -274,7 +275,7 @@ def time_state(sw: Swarm, heading: float, kind: str, repeat: int) -> dict:
     row.update(n=cx.n, edges=cx.n_edges, triangles=cx.n_triangles, K=int(fence.frontier.size),
                O=int(fence.obstacle.size), z=int(fence.z.size), certified=certified,
                redundant=len(plan.redundant), jobs=len(plan.jobs),
-               tasks=sum(1 for a in out if a[0] == "task"))
+               tasks=sum(1 for a in out if isinstance(a, SendTask)))
     return row
 
 

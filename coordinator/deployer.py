@@ -20,6 +20,7 @@ from typing import Callable
 from bus.messages import Complex, Remove, Spawn, Status, Task
 
 from ground.angles import wrap
+from .actions import Action, Done, PublishComplex, RemoveRobot, SendTask, SpawnRobot
 from .config import CoordinatorConfig
 from .evidence import Evidence
 from .planner import CyclePlan, JobSpec, Snapshot, plan_cycle, replan_push
@@ -139,7 +140,7 @@ class Deployer:
         self.uncertified_idle = 0
         self.no_push = 0                             # consecutive plans without a push
         self.pending_holds: dict[int, int] = {}      # new robot -> source vertex to hold
-        self._out: list = []
+        self._out: list[Action] = []
         self.started = False
 
     # ------------------------------------------------------------------ events
@@ -228,8 +229,9 @@ class Deployer:
         return False
 
     # ------------------------------------------------------------------ main
-    def step(self, now: float) -> list:
-        """Advance the state machine at simulated time ``now``; return actions to execute."""
+    def step(self, now: float) -> list[Action]:
+        """Advance the state machine at simulated time ``now``; return the actions to
+        execute, in order (coordinator/actions.py)."""
         self._out = []
         if self.done:
             return self._out
@@ -393,7 +395,7 @@ class Deployer:
             returned_probes=self.evidence.returned_probes(snap.occupant))
         self.next_vertex += len(plan.jobs)
         self.redundant = set(plan.redundant)
-        self._out.append(("complex", self._complex_msg(plan, now, "running")))
+        self._out.append(PublishComplex(self._complex_msg(plan, now, "running")))
         if self._pending_failures and plan.certified:
             self.failures_healed += self._pending_failures
             self._pending_failures = 0
@@ -481,16 +483,16 @@ class Deployer:
         self.certified = True
         self.done = True
         self.stop_reason = "certified"
-        self._out.append(("complex", self._complex_msg(plan, now, "certified")))
-        self._out.append(("done", True))
+        self._out.append(PublishComplex(self._complex_msg(plan, now, "certified")))
+        self._out.append(Done(True))
 
     def _stop(self, why: str) -> None:
         log.error("stopping: %s", why)
         self.done = True
         self.stop_reason = why
         if self.plan is not None:
-            self._out.append(("complex", self._complex_msg(self.plan, 0.0, "stopped")))
-        self._out.append(("done", False))
+            self._out.append(PublishComplex(self._complex_msg(self.plan, 0.0, "stopped")))
+        self._out.append(Done(False))
 
     def _complex_msg(self, plan: CyclePlan, now: float, state: str) -> Complex:
         snap = self.snapshot
@@ -1081,7 +1083,7 @@ class Deployer:
         self.next_task += 1
         task.robot = rid
         task.epoch = self.epoch
-        self._out.append(("task", rid, task))
+        self._out.append(SendTask(rid, task))
         return task.task_id
 
     def _spawn(self, source: int, now: float) -> int:
@@ -1089,7 +1091,7 @@ class Deployer:
         self.next_robot += 1
         kind, live = self.robot_kind(rid)
         self.robots[rid] = Robot(rid, kind=kind, live=live, spawned_t=now)
-        self._out.append(("spawn", Spawn(robot=rid, source=source, kind=kind, live=live)))
+        self._out.append(SpawnRobot(Spawn(robot=rid, source=source, kind=kind, live=live)))
         return rid
 
     def _robots_in_use(self) -> int:
@@ -1104,7 +1106,7 @@ class Deployer:
         v = self.vertex_of.pop(r.rid, None)
         if v is not None:
             self.contact.pop(v, None)
-        self._out.append(("remove", Remove(robot=r.rid, reason=why)))
+        self._out.append(RemoveRobot(Remove(robot=r.rid, reason=why)))
         for job in self.jobs:
             if any(s.robot == r.rid and s.state in ("pending", "running") for s in job.steps):
                 job.aborted = True

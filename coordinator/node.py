@@ -32,6 +32,7 @@ from bus.node import run_node
 from bus.session import Mailbox, Receiver, Shutdown, publisher, query_world_info
 from bus.trust import SignedPublisher, key_from_env
 
+from .actions import Done, PublishComplex, RemoveRobot, SendTask, SpawnRobot
 from .config import CoordinatorConfig
 from .deployer import Deployer
 
@@ -257,40 +258,39 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
         nonlocal rc
         ack = CoordAck(tick=max(tick or 0, 0))
         for action in actions:
-            what = action[0]
-            if what == "task":
-                _, rid, task = action
-                pub = task_pubs.get(rid)
-                if pub is None:
-                    pub = task_pubs[rid] = publisher(session, keys.task(rid))
-                pub.put(task.encode())
-                ack.task_robots.append(rid)
-                ack.task_ids.append(task.task_id)
-            elif what == "spawn":
-                sp = action[1]
-                log.info("spawning robot %d at source %d", sp.robot, sp.source)
-                pub_spawn.put(sp.encode())
-                ack.spawn_ids.append(sp.robot)
-                ack.spawn_sources.append(sp.source)
-                ack.spawn_kinds.append(ROBOT_KINDS.index(sp.kind))
-                ack.spawn_live.append(sp.live)
-            elif what == "remove":
-                pub_remove.put(action[1].encode())
-                ack.remove_ids.append(action[1].robot)
-            elif what == "complex":
-                cx: Complex = action[1]
-                pub_complex.put(cx.encode())
-                log.info("cycle %d: robots %d, complex %d vertices / %d edges / %d "
-                         "triangles, frontier %d, obstacle %d, redundant %d, certified %s",
-                         cx.cycle, cx.robots, len(cx.vertices), len(cx.edges) // 2,
-                         len(cx.triangles) // 3, len(cx.frontier), len(cx.obstacle),
-                         len(cx.redundant), cx.certified)
-            elif what == "done":
-                log.info("done: %s", dep.summary())
-                print(f"DONE certified={action[1]}", flush=True)
-                if args.exit_on_done:
-                    stop.set()
-                rc = 0 if action[1] else 1
+            match action:
+                case SendTask(robot=rid, task=task):
+                    pub = task_pubs.get(rid)
+                    if pub is None:
+                        pub = task_pubs[rid] = publisher(session, keys.task(rid))
+                    pub.put(task.encode())
+                    ack.task_robots.append(rid)
+                    ack.task_ids.append(task.task_id)
+                case SpawnRobot(spawn=sp):
+                    log.info("spawning robot %d at source %d", sp.robot, sp.source)
+                    pub_spawn.put(sp.encode())
+                    ack.spawn_ids.append(sp.robot)
+                    ack.spawn_sources.append(sp.source)
+                    ack.spawn_kinds.append(ROBOT_KINDS.index(sp.kind))
+                    ack.spawn_live.append(sp.live)
+                case RemoveRobot(remove=rm):
+                    pub_remove.put(rm.encode())
+                    ack.remove_ids.append(rm.robot)
+                case PublishComplex(complex=cx):
+                    pub_complex.put(cx.encode())
+                    log.info("cycle %d: robots %d, complex %d vertices / %d edges / %d "
+                             "triangles, frontier %d, obstacle %d, redundant %d, certified %s",
+                             cx.cycle, cx.robots, len(cx.vertices), len(cx.edges) // 2,
+                             len(cx.triangles) // 3, len(cx.frontier), len(cx.obstacle),
+                             len(cx.redundant), cx.certified)
+                case Done(certified=ok):
+                    log.info("done: %s", dep.summary())
+                    print(f"DONE certified={ok}", flush=True)
+                    if args.exit_on_done:
+                        stop.set()
+                    rc = 0 if ok else 1
+                case _:
+                    raise TypeError(f"unknown deployer action {action!r}")
         if tick is not None:
             nonlocal last_ack
             last_ack = (tick, ack.encode())

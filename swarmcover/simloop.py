@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bus.messages import Complex, Sense, Status
+from coordinator.actions import Done, PublishComplex, RemoveRobot, SendTask, SpawnRobot
 
 log = logging.getLogger("swarmcover.simloop")
 
@@ -112,21 +113,24 @@ class SimLoop:
         tasks: dict[int, list] = {}
         ops: list = []
         for a in actions:
-            kind = a[0]
-            if kind == "task":
-                tasks.setdefault(a[1], []).append(a[2])
-            elif kind in ("spawn", "remove"):
-                ops.append(a)
-            elif kind == "complex":
-                self.complexes.append(a[1])
-            elif kind == "done":
-                done = True
+            match a:
+                case SendTask(robot=rid, task=task):
+                    tasks.setdefault(rid, []).append(task)
+                case SpawnRobot() | RemoveRobot():
+                    ops.append(a)
+                case PublishComplex(complex=cx):
+                    self.complexes.append(cx)
+                case Done():
+                    done = True
+                case _:
+                    raise TypeError(f"unknown deployer action {a!r}")
         return done, tasks, ops
 
     def _apply_ops(self) -> None:
         ops, self._ops = self._ops, []
-        for kind, m in ops:
-            if kind == "spawn":
+        for op in ops:
+            if isinstance(op, SpawnRobot):
+                m = op.spawn
                 if self.physics.has(m.robot):
                     continue
                 x, y, th = self.wm.sources[m.source]
@@ -138,6 +142,7 @@ class SimLoop:
                 self.joins[m.robot] = self.tick + self.join_ticks
                 self.spawned += 1
             else:
+                m = op.remove
                 if self.physics.remove(m.robot):
                     self.agents.pop(m.robot, None)
                     self.roster.discard(m.robot)

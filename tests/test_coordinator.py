@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from bus.messages import Status
+from coordinator.actions import PublishComplex, SendTask, SpawnRobot
 from coordinator.config import CoordinatorConfig
 from coordinator.deployer import Deployer
 from swarmcover.simloop import SimLoop
@@ -35,19 +36,19 @@ def test_config_errors_name_the_field():
 def test_first_cycle_spawns_then_holds_then_deploys_the_lone_robot():
     dep = Deployer(CoordinatorConfig(), sources=[0.5])
     acts = dep.step(0.0) + dep.step(1.5)
-    spawns = [a[1] for a in acts if a[0] == "spawn"]
+    spawns = [a.spawn for a in acts if isinstance(a, SpawnRobot)]
     assert [s.robot for s in spawns] == [0] and spawns[0].source == 0
     dep.on_alive(0, True, 1.5)
     dep.on_status(Status(robot=0, seq=1, t=1.6, state="idle"))
     acts = dep.step(1.6)
-    (task,) = [a[2] for a in acts if a[0] == "task"]
+    (task,) = [a.task for a in acts if isinstance(a, SendTask)]
     assert task.kind == "hold" and task.vertex == 0 and task.robot == 0
     dep.on_status(Status(robot=0, seq=2, t=2.0, state="holding", vertex=0,
                          task_id=task.task_id, task_state="done"))
     acts = dep.step(2.0) + dep.step(3.0) + dep.step(3.1)
-    cx = [a[1] for a in acts if a[0] == "complex"]
+    cx = [a.complex for a in acts if isinstance(a, PublishComplex)]
     assert cx and cx[0].vertices == [0] and not cx[0].certified
-    td = [a[2] for a in acts if a[0] == "task"]
+    td = [a.task for a in acts if isinstance(a, SendTask)]
     # a lone robot is frontier: it test-drives along the base heading first
     assert td and td[0].kind == "test_drive" and td[0].direction == pytest.approx(0.5)
 

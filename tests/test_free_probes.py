@@ -13,6 +13,7 @@ import numpy as np
 
 from bus.messages import Status
 from coordinator import build_complex, detect_fence
+from coordinator.actions import SendTask
 from coordinator.config import CoordinatorConfig
 from coordinator.deployer import Deployer, Robot
 from coordinator.evidence import Evidence, probe_key
@@ -142,7 +143,7 @@ def _deployer(snap):
 
 
 def _tasks(dep):
-    return [a[2] for a in dep._out if a[0] == "task"]
+    return [a.task for a in dep._out if isinstance(a, SendTask)]
 
 
 def _start_free_probe():

@@ -1,0 +1,49 @@
+"""What the deployment cycle asks its process to do: typed actions, one class per kind.
+
+:meth:`coordinator.deployer.Deployer.step` returns a list of these, in order; the
+coordinator process (coordinator/node.py) turns each into a message on the bus, and the
+in-process loop (swarmcover/simloop.py) applies each directly. Both dispatch with ``match``
+on the class, so a new kind is a new class, never a new string.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Union
+
+from bus.messages import Complex, Remove, Spawn, Task
+
+
+@dataclass(frozen=True)
+class SendTask:
+    """Send ``task`` to robot ``robot`` (its Task key)."""
+    robot: int
+    task: Task
+
+
+@dataclass(frozen=True)
+class SpawnRobot:
+    """Ask for a new robot at a source (the world adds its body, ``run`` its agent)."""
+    spawn: Spawn
+
+
+@dataclass(frozen=True)
+class RemoveRobot:
+    """Take a robot's body out of the world (it failed or was sent away)."""
+    remove: Remove
+
+
+@dataclass(frozen=True)
+class PublishComplex:
+    """Publish the cycle's complex, fence and certificate state."""
+    complex: Complex
+
+
+@dataclass(frozen=True)
+class Done:
+    """The run is over: ``certified`` or stopped (Deployer.stop_reason says why)."""
+    certified: bool
+
+
+Action = Union[SendTask, SpawnRobot, RemoveRobot, PublishComplex, Done]
+
+__all__ = ["Action", "Done", "PublishComplex", "RemoveRobot", "SendTask", "SpawnRobot"]
