@@ -391,6 +391,27 @@ def small_run(out: Path, router_endpoint: str, config: str = "configs/small.toml
                 certified=bool(summary.get("certified")) and rc == 0)
 
 
+def clocked_config(config: str, work: Path, realtime: bool, rtf: float = 1.0) -> str:
+    """``config`` itself for lockstep; for ``realtime`` a copy in ``work`` with
+    ``[world] mode = "realtime"`` and ``rtf`` (a ROS map path made absolute, so the copy
+    reads the same map)."""
+    if not realtime:
+        return config
+    import tomllib
+
+    from ground.toml import dumps_toml
+    src = (ROOT / config) if not Path(config).is_absolute() else Path(config)
+    raw = tomllib.loads(src.read_text())
+    raw.setdefault("world", {}).update(mode="realtime", rtf=float(rtf))
+    ros = raw.get("map", {}).get("ros_map")
+    if ros and not Path(ros).is_absolute():
+        raw["map"]["ros_map"] = str((src.parent / ros).resolve())
+    work.mkdir(parents=True, exist_ok=True)
+    out = work / f"{src.stem}-realtime-{rtf:g}.toml"
+    out.write_text(dumps_toml(raw))
+    return str(out)
+
+
 def first_cycle(out: Path, timeout: float = 60.0) -> dict | None:
     """Wait for the first row of the run's cycles.jsonl."""
     end = time.monotonic() + timeout
@@ -620,6 +641,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--per-topic", type=int, default=10_000)
     ap.add_argument("--wall-timeout", type=float, default=120.0)
     ap.add_argument("--work", default="/tmp/swarmcover-faults")
+    ap.add_argument("--config", default="configs/small.toml",
+                    help="run config of the loss, delay and restart runs")
+    ap.add_argument("--realtime", action="store_true",
+                    help="run them on the real-time clock ([world] mode = realtime) at --rtf")
+    ap.add_argument("--rtf", type=float, default=1.0,
+                    help="real-time factor with --realtime (1 = a real lab's speed)")
     args = ap.parse_args(argv)
     # SIGTERM unwinds like Ctrl-C, so every finally below stops the processes it started
     signal.signal(signal.SIGTERM, lambda *a: (_ for _ in ()).throw(KeyboardInterrupt()))
@@ -628,9 +655,13 @@ def main(argv: list[str] | None = None) -> int:
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     result: dict = {"bench": "faults"}
+    if args.what != "fuzz":  # the fuzz campaign has its own config (FUZZ_CONFIG)
+        result.update(config=args.config,
+                      clock=f"realtime x{args.rtf:g}" if args.realtime else "lockstep")
+    config = clocked_config(args.config, work, args.realtime, args.rtf)
 
     def baseline():
-        r = lossy_run(work / "base", 0.0, 0.0, wall_timeout=args.wall_timeout)
+        r = lossy_run(work / "base", 0.0, 0.0, wall_timeout=args.wall_timeout, config=config)
         _log(f"baseline: certified={r['certified']} wall={r['wall_s']:.1f}s")
         return r
 
@@ -639,7 +670,8 @@ def main(argv: list[str] | None = None) -> int:
         for loss in [float(x) for x in args.losses.split(",")]:
             for rep in range(args.repeats):
                 r = lossy_run(work / f"loss-{loss}-{rep}", loss, args.base_delay_ms / 1000,
-                              wall_timeout=args.wall_timeout, seed=rep, rto_s=args.rto_ms / 1000)
+                              wall_timeout=args.wall_timeout, seed=rep, rto_s=args.rto_ms / 1000,
+                              config=config)
                 rows.append(dict(loss=loss, rep=rep, certified=r["certified"],
                                  wall_s=round(r["wall_s"], 2), sim_s=r.get("sim_time_s"),
                                  sim_per_wall=round((r.get("sim_time_s") or 0) / r["wall_s"], 3),
@@ -656,7 +688,8 @@ def main(argv: list[str] | None = None) -> int:
         for loss in [float(x) for x in args.losses.split(",")]:
             for rep in range(args.repeats):
                 try:
-                    r = netns_loss_run(work / f"nloss-{loss}-{rep}", loss, args.wall_timeout)
+                    r = netns_loss_run(work / f"nloss-{loss}-{rep}", loss, args.wall_timeout,
+                                       config=config)
                 except OSError as e:
                     _log(f"netns-loss: skipped ({e})")
                     rows = None
@@ -677,15 +710,16 @@ def main(argv: list[str] | None = None) -> int:
         rows = []
         for dms in [float(x) for x in args.delays_ms.split(",")]:
             r = lossy_run(work / f"delay-{dms}", 0.0, dms / 1000, jitter_s=dms / 10000,
-                          wall_timeout=args.wall_timeout)
+                          wall_timeout=args.wall_timeout, config=config)
             rows.append(dict(delay_ms=dms, certified=r["certified"], wall_s=round(r["wall_s"], 2),
                              sim_s=r.get("sim_time_s"), robots=r.get("robots_used"),
+                             cycles=r.get("cycles"), coverage=r.get("coverage"),
                              sim_per_wall=round((r.get("sim_time_s") or 0) / r["wall_s"], 3)))
             _log(f"delay {dms} ms: {rows[-1]}")
         ok = [r["delay_ms"] for r in rows if r["certified"]]
         result["delay"] = dict(rows=rows, max_certified_delay_ms=max(ok) if ok else None)
     if args.what in ("restart", "all"):
-        r = restart_run(work / "restart", wall_timeout=args.wall_timeout)
+        r = restart_run(work / "restart", wall_timeout=args.wall_timeout, config=config)
         result["restart"] = {k: r.get(k) for k in ("certified", "rc", "wall_s", "sim_time_s",
                                                    "outage_s", "cycles", "robots_used",
                                                    "failures_healed")}

@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from procs import ROOT, pids_with
 
 sys.path.insert(0, str(ROOT))
-from bench.faults import (FaultProxy, fuzz_processes, fuzz_targets, invalid_payloads,  # noqa: E402
+from bench.faults import (FaultProxy, clocked_config, fuzz_processes, fuzz_targets, invalid_payloads,  # noqa: E402
                           lossy_run, loss_stall, netns_loss_run, read_counters, restart_run,
                           send_fuzz, wait_quiet)
 from bus.keys import Keys  # noqa: E402
@@ -75,6 +75,18 @@ def _echo_server():
                 c.sendall(data)
     threading.Thread(target=serve, daemon=True).start()
     return srv
+
+
+def test_the_realtime_variant_of_a_config_loads_with_the_real_time_clock(tmp_path):
+    """bench/faults.py --realtime runs a copy of the config on the real-time clock; a ROS
+    map path is made absolute so the copy reads the same map."""
+    from world.config import load_config
+    assert clocked_config("configs/tiny.toml", tmp_path, realtime=False) == "configs/tiny.toml"
+    for name in ("tiny", "office_ros"):
+        path = clocked_config(f"configs/{name}.toml", tmp_path, realtime=True, rtf=2.0)
+        cfg, orig = load_config(path), load_config(str(ROOT / "configs" / f"{name}.toml"))
+        assert (cfg.world.mode, cfg.world.rtf) == ("realtime", 2.0)
+        assert cfg.map == orig.map and cfg.robots == orig.robots and cfg.rv == orig.rv
 
 
 def test_fault_proxy_keeps_the_stream_intact_and_in_order_while_delaying_it():
