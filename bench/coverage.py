@@ -42,7 +42,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def run_inproc(config: str, seed: int, timeout: float) -> dict:
+def run_inproc(config: str, seed: int, timeout: float, overrides: dict | None = None) -> dict:
     from bus.messages import Truth
     from swarmcover.run import compute_summary
     from swarmcover.simloop import SimLoop
@@ -51,7 +51,7 @@ def run_inproc(config: str, seed: int, timeout: float) -> dict:
     from world.maps import build_map
     cfg = load_config(config)
     cfg, _, limits = default_robots_max(cfg, build_map(cfg), "")  # as `run` does
-    sim = SimLoop(cfg, seed=seed)
+    sim = SimLoop(cfg, seed=seed, coordinator_overrides=overrides)
     t0 = time.monotonic()
     res = sim.run(max_sim_s=20_000, max_wall_s=timeout)
     ids = sorted(r for r in res.positions if r in sim.agents)
@@ -137,7 +137,22 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[0])
     p.add_argument("--inproc", action="store_true", help="one process (swarmcover.simloop)")
     p.add_argument("--timeout", type=float, default=3600.0, help="wall seconds per run")
+    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                   help="with --inproc: override a [coordinator] field, e.g. door_min_rv=0.3 "
+                        "(a TOML value; checked like the config's own)")
     args = p.parse_args(argv)
+    overrides = {}
+    for item in args.set:
+        import tomllib
+        name, eq, val = item.partition("=")
+        try:
+            overrides.update(tomllib.loads(f"{name.strip()} = {val.strip()}") if eq else {None: 0})
+        except tomllib.TOMLDecodeError as e:
+            p.error(f"--set {item!r}: not FIELD=VALUE with a TOML value ({e})")
+        if None in overrides:
+            p.error(f"--set {item!r}: not FIELD=VALUE")
+    if overrides and not args.inproc:
+        p.error("--set needs --inproc (a distributed run reads [coordinator] from its config)")
     configs = args.configs or sorted(str(c.relative_to(ROOT)) for c in (ROOT / "configs").glob("*.toml")
                                      if c.name != "mixed.toml")
     results = []
@@ -149,7 +164,7 @@ def main(argv=None) -> int:
                   f"({'in-process' if args.inproc else 'distributed'}) ... "
                   f"elapsed {time.monotonic() - t0:.0f} s", file=sys.stderr, flush=True)
             if args.inproc:
-                s = run_inproc(config, seed, args.timeout)
+                s = run_inproc(config, seed, args.timeout, overrides)
             else:
                 with tempfile.TemporaryDirectory() as d:
                     s = run_distributed(config, seed, Path(d) / "run", args.timeout)
@@ -170,7 +185,8 @@ def main(argv=None) -> int:
             "uncovered_reachable_m2", "cycles", "sim_time_s", "wall_time_s", "mode")
     print(table(results), flush=True)
     from swarmcover.run import strict_json
-    print(strict_json({"bench": "coverage", "runs": [{k: s.get(k) for k in keys} for s in results]}))
+    print(strict_json({"bench": "coverage", "overrides": overrides,
+                       "runs": [{k: s.get(k) for k in keys} for s in results]}))
     return 0
 
 
