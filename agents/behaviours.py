@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
+from enum import StrEnum
 
 from bus.messages import Sense, Task
 
@@ -30,7 +31,22 @@ from .control import (FrameTracker, StopRule, away_direction, blocks, bearing_er
 from .params import AgentParams
 
 PI = math.pi
-MOVING_MODES = ("home", "open", "open_back", "scale_out", "scale_back")
+
+
+class Mode(StrEnum):
+    """What the behaviour does this tick; each has one ``_tick_<mode>`` method (the
+    dispatch table :attr:`Behaviour._ticks`). A StrEnum: equal to its name as a string."""
+    IDLE = "idle"              # no task
+    RECORD = "record"          # holding: recording the landmarks' bearings
+    KEEP = "keep"              # holding: keeping them (station keeping if enabled)
+    HOME = "home"              # homing on target bearings (goto, deploy, return)
+    OPEN = "open"              # driving out on a heading (test drive, probe, spawn entry)
+    OPEN_BACK = "open_back"    # back along it after a touch or a lost link
+    SCALE_OUT = "scale_out"    # rv scale measurement: out until a neighbour is lost
+    SCALE_BACK = "scale_back"  # and back until it is seen again
+
+
+MOVING_MODES = frozenset({Mode.HOME, Mode.OPEN, Mode.OPEN_BACK, Mode.SCALE_OUT, Mode.SCALE_BACK})
 
 
 @dataclass(slots=True)
@@ -53,7 +69,11 @@ class Behaviour:
         p = self.p = params
         self.robot = robot
         self.state = "starting"
-        self.mode = "idle"
+        self.mode = Mode.IDLE
+        self._ticks = {Mode.IDLE: self._tick_idle, Mode.RECORD: self._tick_record,
+                       Mode.KEEP: self._tick_keep, Mode.HOME: self._tick_home,
+                       Mode.OPEN: self._tick_open, Mode.OPEN_BACK: self._tick_open_back,
+                       Mode.SCALE_OUT: self._tick_scale_out, Mode.SCALE_BACK: self._tick_scale_back}
         self.task: Task | None = None
         self.pending: Task | None = None
         self.task_state = "none"
@@ -174,7 +194,7 @@ class Behaviour:
                 and task.kind not in ("hold", "leave") and self.t - self.t0 > task.timeout_s):
             self._finish("failed", self._fail_reason("timeout"))
         self.intent = None
-        ux, uy = getattr(self, "_tick_" + self.mode)()
+        ux, uy = self._ticks[self.mode]()
         self.cmd = self._output(ux, uy)
         return self.cmd
 
@@ -182,7 +202,7 @@ class Behaviour:
 
     def status(self) -> dict:
         """Status fields (robot, seq, t, kind, live, pose are the caller's)."""
-        holding_still = self.mode in ("record", "keep") and not self.station
+        holding_still = self.mode in (Mode.RECORD, Mode.KEEP) and not self.station
         ids = list(self.seen)
         if holding_still:
             bearings = []
@@ -352,7 +372,7 @@ class Behaviour:
                 self._start_test_leg()
         else:  # leave
             self.vertex = -1
-            self.mode = "idle"
+            self.mode = Mode.IDLE
             self._set_state("idle")
             self.progress = 1.0
             self._set_task_state("done")
@@ -387,7 +407,7 @@ class Behaviour:
     # ------------------------------------------------------------------ holding
 
     def _enter_record(self) -> None:
-        self.mode = "record"
+        self.mode = Mode.RECORD
         self._set_state("holding")
         self.window = {}
         self.record_n = 0
@@ -415,7 +435,7 @@ class Behaviour:
                            if len(w) >= need and (m := circmean(w)) is not None}
             self.target_frame = (FrameTracker.snapshot(self.seen, self.back, self.heading)
                                  if self.p.aligned else None)
-            self.mode = "keep"
+            self.mode = Mode.KEEP
             if self.task is not None and self.task.kind == "hold" and self.task_state == "running":
                 self._finish_hold()
         return 0.0, 0.0
@@ -479,7 +499,7 @@ class Behaviour:
     # ------------------------------------------------------------------ homing
 
     def _enter_home(self, goal: dict[int, float], purpose: str) -> None:
-        self.mode = "home"
+        self.mode = Mode.HOME
         self.home_mark = self.advance
         self.stall_best = math.inf     # smallest max bearing error so far (rad)
         self.stall_t = self.t          # when it last improved by stall_deg
@@ -563,7 +583,7 @@ class Behaviour:
 
     def _enter_open(self, direction: float, distance: float, speed: float, purpose: str,
                     single: int | None = None) -> None:
-        self.mode = "open"
+        self.mode = Mode.OPEN
         self.ol_dir = direction
         self.ol_dist = distance
         self.ol_speed = speed
@@ -593,10 +613,10 @@ class Behaviour:
                 self._finish("done", "wall")
                 return 0.0, 0.0
             self._test_touch()
-            return getattr(self, "_tick_" + self.mode)()
+            return self._ticks[self.mode]()
         if self.single is not None and self.n - self.last_seen.get(self.single, -10**9) \
                 >= p.link_lost_ticks:
-            self.mode = "open_back"
+            self.mode = Mode.OPEN_BACK
             self.out_dist = done
             self.mark = self.advance
             return self._tick_open_back()
@@ -685,7 +705,7 @@ class Behaviour:
             return
         self.ref_bearing = {l: self.seen[l] for l in self.refs}
         self.ref_heading = {l: self.heading for l in self.refs}
-        self.mode = "scale_out"
+        self.mode = Mode.SCALE_OUT
         self.mark = self.advance
         self.blocked_since = None
 
@@ -698,7 +718,7 @@ class Behaviour:
         out = self.advance - self.mark
         lost = [l for l in self.refs if self.n - self.last_seen.get(l, -10**9) >= p.link_lost_ticks]
         if lost:
-            self.mode = "scale_back"
+            self.mode = Mode.SCALE_BACK
             self.out_dist = out
             self.mark = self.advance
             self.step_left = 0.0

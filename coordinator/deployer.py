@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Callable
 
 from bus.messages import Complex, Remove, Spawn, Status, Task
@@ -26,6 +27,16 @@ from .evidence import Evidence
 from .planner import CyclePlan, JobSpec, Snapshot, plan_cycle, replan_push
 
 log = logging.getLogger("swarmcover.coordinator")
+
+
+class Phase(StrEnum):
+    """Where the deployment cycle is; each has one ``_phase_<name>`` method (the dispatch
+    table :attr:`Deployer._phases`). A StrEnum: equal to its name as a string."""
+    INIT = "init"          # who is there: resume from their statuses, or spawn the firsts
+    FIRST = "first"        # the first robot at each source reports, then holds its vertex
+    EXECUTE = "execute"    # the cycle's pushes and probes run until all robots settle
+    SETTLE = "settle"      # wait settle_s and fresh statuses, then plan the next cycle
+    FINAL = "final"        # redundant robots were sent away: re-certify once they are idle
 
 
 def td_length(spec: JobSpec, params) -> float:
@@ -122,7 +133,10 @@ class Deployer:
         self.next_vertex = len(self.sources)
         self.next_task = 1
         self.cycle = 0
-        self.phase = "init"
+        self.phase = Phase.INIT
+        self._phases = {Phase.INIT: self._phase_init, Phase.FIRST: self._phase_first,
+                        Phase.EXECUTE: self._phase_execute, Phase.SETTLE: self._phase_settle,
+                        Phase.FINAL: self._phase_final}
         self.phase_t = 0.0
         self.jobs: list[PushJob] = []
         self.plan: CyclePlan | None = None
@@ -158,7 +172,7 @@ class Deployer:
         r.status_cycle = self.cycle
         r.alive = True
         r.gone_since = None
-        if self.phase == "init" and st.vertex >= 0:
+        if self.phase == Phase.INIT and st.vertex >= 0:
             # restart: adopt the agent's own idea of its vertex
             self.vertex_of.setdefault(st.robot, st.vertex)
             self.next_vertex = max(self.next_vertex, st.vertex + 1)
@@ -224,7 +238,7 @@ class Deployer:
             log.info("a robot failed after certification: resuming deployment cycles")
             self.done = self.certified = False
             self.final_pass = False
-            self._set_phase("settle", now)
+            self._set_phase(Phase.SETTLE, now)
             return True
         return False
 
@@ -236,8 +250,7 @@ class Deployer:
         if self.done:
             return self._out
         self._heartbeat(now)
-        handler = getattr(self, f"_phase_{self.phase}")
-        handler(now)
+        self._phases[self.phase](now)
         return self._out
 
     # ------------------------------------------------------------------ phases
@@ -256,12 +269,12 @@ class Deployer:
             for r in known:
                 if r.rid not in self.vertex_of and r.status.vertex >= 0:
                     self.vertex_of[r.rid] = r.status.vertex
-            self._set_phase("execute", now)  # wait for running tasks, then plan
+            self._set_phase(Phase.EXECUTE, now)  # wait for running tasks, then plan
             return
         if not known and now - self.phase_t >= 1.0:
             for k in range(len(self.sources)):
                 self._spawn(k, now)
-            self._set_phase("first", now)
+            self._set_phase(Phase.FIRST, now)
 
     def _phase_first(self, now: float) -> None:
         """Wait until the first robot(s) report, then make them hold the source vertices."""
@@ -270,7 +283,7 @@ class Deployer:
             for k, r in enumerate(firsts):
                 self.vertex_of[r.rid] = k
                 self._send(r.rid, Task(kind="hold", vertex=k, timeout_s=self.cfg.task_timeout_s), now)
-            self._set_phase("execute", now)
+            self._set_phase(Phase.EXECUTE, now)
         elif now - self.phase_t > self.cfg.spawn_timeout_s:
             self._stop("first robot never reported (is an agent started for robot 0?)")
 
@@ -287,7 +300,7 @@ class Deployer:
         if all(j.finished for j in self.jobs) and not self.pending_holds and self._all_settled():
             self.jobs = []
             self.cycle_end_t = now
-            self._set_phase("settle", now)
+            self._set_phase(Phase.SETTLE, now)
 
     def _phase_settle(self, now: float) -> None:
         if now - self.phase_t < self.cfg.settle_s:
@@ -406,7 +419,7 @@ class Deployer:
                     rid = self._spawn(k, now)
                     self.vertex_of[rid] = k
                     self.pending_holds[rid] = k
-            self._set_phase("execute", now)
+            self._set_phase(Phase.EXECUTE, now)
             return
         if not plan.frontier and not plan.open_vertices:
             if plan.certified:
@@ -458,7 +471,7 @@ class Deployer:
         else:
             self.no_push = 0
         self.cycle += 1
-        self._set_phase("execute", now)
+        self._set_phase(Phase.EXECUTE, now)
 
     def _finish(self, plan: CyclePlan, now: float) -> None:
         if self.cfg.final_recheck and plan.redundant:
@@ -474,11 +487,11 @@ class Deployer:
                 self._send(rid, Task(kind="leave", vertex=-1,
                                      timeout_s=self.cfg.task_timeout_s), now)
             self.redundant = set()
-            self._set_phase("final", now)
+            self._set_phase(Phase.FINAL, now)
             return
         if self.cfg.final_recheck and not self.final_pass:
             self.final_pass = True
-            self._set_phase("final", now)
+            self._set_phase(Phase.FINAL, now)
             return
         self.certified = True
         self.done = True
@@ -1121,7 +1134,7 @@ class Deployer:
             if (not r.dead and r.gone_since is not None
                     and now - r.gone_since >= self.cfg.dead_grace_s):
                 self._robot_died(r, now, "liveliness token gone")
-        if self.phase not in ("settle",):
+        if self.phase != Phase.SETTLE:
             return
         for r in list(self.robots.values()):
             if (r.alive and not r.dead and r.rid in self.vertex_of
@@ -1135,7 +1148,7 @@ class Deployer:
                 return False
         return True
 
-    def _set_phase(self, phase: str, now: float) -> None:
+    def _set_phase(self, phase: Phase, now: float) -> None:
         self.phase = phase
         self.phase_t = now
 
