@@ -23,7 +23,7 @@ from collections import deque
 from dataclasses import dataclass
 from enum import StrEnum
 
-from bus.messages import Sense, Task
+from bus.messages import Sense, Status, Task
 
 from .control import (FrameTracker, StopRule, away_direction, blocks, bearing_errors,
                       circmean, clamp_speed, diffdrive, homing_velocity, resultant, slide, unit,
@@ -199,6 +199,14 @@ class Behaviour:
         return self.cmd
 
     # ================================================================== status
+
+    def status_message(self, seq: int, t: float, tick: int = -1, live: bool = False,
+                       pose: list | None = None) -> Status:
+        """The Status this robot publishes: its behaviour's fields plus the caller's
+        sequence number, sim time, answered tick, live flag and body pose (the agent
+        process and the in-process loop both build it here)."""
+        return Status(robot=self.robot, seq=seq, t=t, kind=self.p.kind, live=live,
+                      pose=list(pose or []), tick=tick, **self.status())
 
     def status(self) -> dict:
         """Status fields (robot, seq, t, kind, live, pose are the caller's)."""

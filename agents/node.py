@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 from bus.keys import Keys
-from bus.messages import CmdVel, Pose, Sense, Status, Task
+from bus.messages import CmdVel, Pose, Sense, Task
 from bus.node import ready, run_node
 from bus.session import Mailbox, Receiver, Shutdown, add_zenoh_args, publisher, query_world_info
 
@@ -169,8 +169,7 @@ class AgentNode:
 
     def publish_status(self, tick: int = -1) -> None:
         self.seq += 1
-        st = Status(robot=self.rid, seq=self.seq, t=self.last_t, kind=self.p.kind,
-                    live=self.live, pose=self.last_pose, tick=tick, **self.beh.status())
+        st = self.beh.status_message(self.seq, self.last_t, tick, self.live, self.last_pose)
         self.pub_status.put(st.encode())
         self.beh.changed = False
         self.last_status = time.monotonic()

@@ -158,8 +158,7 @@ class SimLoop:
 
     def _status(self, rid: int, beh, t: float, tick: int) -> Status:
         self.seq[rid] += 1
-        return Status(robot=rid, seq=self.seq[rid], t=t, kind=beh.p.kind, tick=tick,
-                      **beh.status())
+        return beh.status_message(self.seq[rid], t, tick)
 
     # ------------------------------------------------------------------ loop
     def _boundary(self) -> bool:
