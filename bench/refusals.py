@@ -2,7 +2,7 @@
 
 Grows the maps of bench/truth.py (same seeds, same growth loop: ``truth.run_map``),
 keeps the end state (true positions, complex, fence) and, for maps certify refuses,
-classifies every odd vertex of the target z_raw (coordinator.certificate's docstring)
+classifies every odd vertex of the target z_raw (coordinator.topology.certificate's docstring)
 with the true positions:
 
 * ``interior``: a one-sided edge at the vertex whose open side is covered by other
@@ -96,7 +96,7 @@ def certify_toggle(cx, fence, k):
     """The 'toggle' variant: the closure f may also remove target edges, f any edge with
     both ends within k hops of an odd vertex, z = z_raw XOR f. Returns (certified, ok):
     ok = boundary(chain) == z, z a cycle, f in that zone (checked here, not trusted)."""
-    from coordinator import certificate as C
+    from coordinator.topology import certificate as C
     zr = np.zeros(cx.n_edges, bool)
     zr[np.asarray(fence.z_raw, int)] = True
     if not zr.any():
@@ -131,7 +131,7 @@ def _ball(cx, odd, k):
 
 
 def certify_with(cx, fence, variant: str):
-    from coordinator import certificate as C
+    from coordinator.topology import certificate as C
     if variant.endswith("t"):
         ok, good = certify_toggle(cx, fence, int(variant[1]))
         return type("C", (), {"certified": ok})(), good

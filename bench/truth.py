@@ -15,8 +15,8 @@ along the deployment bearing; if its disk (radius r) touches a wall within wall_
 leaves it at the wall as a new robot (touch flag and contact bearing), a clear drive places
 a new robot at d0. A probe (kind "probe", when the fence offers it) first moves
 ``via_frac`` along its edge toward the other end, then drives ``depth_rv`` rv along its
-bearing, with the same outcomes (coordinator.fence's Deployment docstring). Drive outcomes
-go back to the fence through ``coordinator.evidence`` when the project has it (else as
+bearing, with the same outcomes (coordinator.topology.fence's Deployment docstring). Drive outcomes
+go back to the fence through ``coordinator.topology.evidence`` when the project has it (else as
 ``test_drive_failures``). The loop runs until the fence has no deployment left, or a robot
 cap; with no frontier edge either that is a fixed point. The claim is then the deployer's
 own finish rule, ``coordinator.planner.plan_cycle`` on the same reports: complete =
@@ -356,13 +356,13 @@ def execute(sw: Swarm, dep) -> Outcome:
 
 
 class Feedback:
-    """Drive outcomes -> detect_fence's keyword arguments. Uses ``coordinator.evidence``
+    """Drive outcomes -> detect_fence's keyword arguments. Uses ``coordinator.topology.evidence``
     when the project has it (its Evidence records every outcome), else the legacy
     ``test_drive_failures`` {vertex: [direction, ...]} of failed drives."""
 
     def __init__(self, door_min_rv: float | None = None):
         try:
-            from coordinator import evidence as ev  # noqa: F401
+            from coordinator.topology import evidence as ev  # noqa: F401
             from coordinator.config import CoordinatorConfig
             door = CoordinatorConfig().door_min_rv if door_min_rv is None else door_min_rv
             self._ev = ev.Evidence(door_min_rv=door, robot_radius_rv=RADIUS / RV)
@@ -694,7 +694,7 @@ def main(argv=None) -> int:
     ap.add_argument("--door-min-rv", type=float, default=None,
                     help="[coordinator] door_min_rv for the probes (default: the config's)")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                    help="override a coordinator.params.TopologyParams field, e.g. corner_probes=true")
+                    help="override a coordinator.topology.params.TopologyParams field, e.g. corner_probes=true")
     a = ap.parse_args(argv)
     if a.maps < 1 or a.jobs < 1:
         print("truth.py: --maps and --jobs must be >= 1", file=sys.stderr)

@@ -414,7 +414,7 @@ class Task(Message):
     ref_offsets: per landmark, heading of the reference frame minus the landmark's heading
       (rad), for frame alignment (spec 4.7); [] means frames are parallel (psi = 0).
     via_landmarks / via_bearings (test_drive only; default empty = no approach leg): a
-      probe (coordinator.evidence) first homes to the point where it sees each via landmark
+      probe (coordinator.topology.evidence) first homes to the point where it sees each via landmark
       (robot ids, a subset of ``landmarks`` so ``ref_offsets`` align them) at its via
       bearing (rad, reference frame); with one via landmark it drives open loop along that
       bearing for ``via_distance`` (m) instead. Then it drives along ``direction``. A touch

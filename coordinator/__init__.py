@@ -1,24 +1,17 @@
-"""swarmcover coordinator: the topology core (pure functions, no I/O).
+"""swarmcover coordinator, in three layers, each importing only the ones below it:
 
-Works on node ids, neighbour bearings (rad, body frame) and touch flags; never measured
-positions (``shape`` estimates the swarm's shape from those bearings).
+* ``coordinator.topology``: the topology core (pure functions, no I/O);
+* the deployment cycle: ``deployer`` (a pure state machine: statuses in, typed
+  ``actions`` out), ``planner`` (one cycle's plan from a snapshot), ``config``;
+* ``node``: the Zenoh process around the deployer.
 
-Each module's ``__all__`` is the one list of what it exports; this package re-exports them
-(of ``angles`` only ``wrap`` and ``circular_mean``).
+This package re-exports the topology core (and ``wrap`` and ``circular_mean``), so
+``from coordinator import build_complex, certify`` keeps working.
 """
-from . import certificate, complex, fence, gvg, params, paths, redundancy, shape, targets
 from ground.angles import circular_mean, wrap
-from .certificate import *  # noqa: F403
-from .complex import *  # noqa: F403
-from .fence import *  # noqa: F403
-from .gvg import *  # noqa: F403
-from .params import *  # noqa: F403
-from .paths import *  # noqa: F403
-from .redundancy import *  # noqa: F403
-from .shape import *  # noqa: F403
-from .targets import *  # noqa: F403
 
-__all__ = ["wrap", "circular_mean"] + [
-    name for module in (params, complex, fence, certificate, redundancy, paths, targets, gvg,
-                        shape)
-    for name in module.__all__]
+from . import topology
+from .topology import *  # noqa: F403
+from .topology import certificate, complex, fence, gvg, params, paths, redundancy, shape, targets  # noqa: F401
+
+__all__ = ["wrap", "circular_mean"] + topology.__all__

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 from bus.configcheck import ConfigError, check_fields
 
-from .params import TopologyParams
+from .topology.params import TopologyParams
 
 
 @dataclass(frozen=True)
@@ -69,7 +69,7 @@ class CoordinatorConfig:
                                    # perpendicular to it at every interior fraction k/n of its
                                    # length touched; spacing door_min_rv - 2 x robot radius
                                    # (x rv), so any opening at least this wide in front of it
-                                   # is driven through (coordinator.evidence). 0.4 with a
+                                   # is driven through (coordinator.topology.evidence). 0.4 with a
                                    # 0.06 m radius at rv = 1 m: probes at 1/4, 1/2, 3/4
     free_probes: bool = True       # frontier robots off every push probe their sides in the
                                    # same cycle without a path, and come back home whatever

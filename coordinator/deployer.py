@@ -23,7 +23,7 @@ from bus.messages import Complex, Remove, Spawn, Status, Task
 from ground.angles import wrap
 from .actions import Action, Done, PublishComplex, RemoveRobot, SendTask, SpawnRobot
 from .config import CoordinatorConfig
-from .evidence import Evidence
+from .topology.evidence import Evidence
 from .planner import CyclePlan, JobSpec, Snapshot, plan_cycle, replan_push
 
 log = logging.getLogger("swarmcover.coordinator")
@@ -830,7 +830,7 @@ class Deployer:
         self._cancel(job, "test drive touched an obstacle")
 
     def _record(self, spec, touched: bool) -> None:
-        """Book a drive's outcome (coordinator.evidence): the direction actually driven."""
+        """Book a drive's outcome (coordinator.topology.evidence): the direction actually driven."""
         dep = spec.deployment
         if dep is None:
             if touched:

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .params import TopologyParams
+from .topology.params import TopologyParams
 
 
 @dataclass
@@ -48,7 +48,7 @@ class JobSpec:
     edge deployed from (None for single file / a lone robot). distance: how far the test
     drive goes (rv units) when the planner chose the new position's distance, else None
     (the configured d_td).
-    A probe (kind "probe", coordinator.evidence) first homes to the point at ``via_frac``
+    A probe (kind "probe", coordinator.topology.evidence) first homes to the point at ``via_frac``
     of the frontier edge from f (``via_landmarks`` / ``via_bearings``, f's occupant's frame;
     empty for an end probe), then drives ``direction`` (perpendicular to the edge) for
     ``distance``; it is never moved onto a lattice point.
@@ -67,7 +67,7 @@ class JobSpec:
     via_frac: float = 0.0          # probe: approach to this fraction of the frontier edge
     via_landmarks: list[int] = field(default_factory=list)    # probe approach: vertex ids
     via_bearings: list[float] = field(default_factory=list)   # and their desired bearings
-    deployment: object = None      # the coordinator.fence.Deployment driven (for Evidence)
+    deployment: object = None      # the coordinator.topology.fence.Deployment driven (for Evidence)
     free: bool = False             # a probe off every path (path [f], nobody refills f):
                                    # it ends back at f whatever it found
 
@@ -107,8 +107,8 @@ def _complex_and_fence(snap: Snapshot, params: TopologyParams, failures: dict,
                        evidence: dict | None = None):
     """The Rips complex of the snapshot and its fence (spec 2-3). evidence: further
     detect_fence keywords (probe_failures, probe_fracs, probe_unreachable)."""
-    from .complex import build_complex
-    from .fence import detect_fence
+    from .topology.complex import build_complex
+    from .topology.fence import detect_fence
 
     cx = build_complex(_reports(snap))
     lone_dir = snap.source_dirs[0] if snap.source_dirs else 0.0
@@ -126,15 +126,15 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
 
     lattice_spacing: when set (rv units) and every robot is holonomic, each new position
     is a point of one triangular lattice of that spacing through the source vertex (from
-    the swarm's shape estimated from bearings, coordinator.shape), so fronts growing from
+    the swarm's shape estimated from bearings, coordinator.topology.shape), so fronts growing from
     different places mesh instead of colliding; else the spec's 60-deg rule at d_td.
 
     test_drive_failures: vertex -> directions of test drives that touched a wall (sticky).
-    evidence: further detect_fence keywords from coordinator.evidence (probe_failures,
+    evidence: further detect_fence keywords from coordinator.topology.evidence (probe_failures,
     probe_fracs, probe_unreachable).
     free_probes: also let frontier robots away from every push probe their side without a
     path (a JobSpec with ``free``; the deployer sends a clear one back home, so no vertex is
-    left empty). returned_probes: probe keys (coordinator.evidence.probe_key) a free probe
+    left empty). returned_probes: probe keys (coordinator.topology.evidence.probe_key) a free probe
     already drove clear and came back from: never offered as a free probe again (their side
     stays open; a push along a path may still take them, and its robot stays there).
     certified is False whenever the fence has no one-sided edge (an empty target cycle
@@ -142,9 +142,9 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     previous_redundant: redundant vertices found earlier (used as path starts until the
     next redundancy pass). protected: vertices that must not be counted redundant.
     """
-    from .certificate import certify
-    from .paths import plan_pushes
-    from .redundancy import find_redundant
+    from .topology.certificate import certify
+    from .topology.paths import plan_pushes
+    from .topology.redundancy import find_redundant
 
     cx, fence = _complex_and_fence(snap, params, test_drive_failures, evidence)
     cert = certify(cx, fence)
@@ -205,13 +205,13 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
 
 
 def _without_probes(fence, skip):
-    """``fence`` with the probe deployments whose key (coordinator.evidence.probe_key) is in
+    """``fence`` with the probe deployments whose key (coordinator.topology.evidence.probe_key) is in
     ``skip`` left out (probes already driven free); ``fence`` itself when skip is empty."""
     if not skip:
         return fence
     from dataclasses import replace
 
-    from .evidence import probe_key
+    from .topology.evidence import probe_key
     deps = {}
     for f, lst in fence.deployments.items():
         lst = tuple(d for d in lst if d.kind != "probe" or d.edge is None
@@ -226,7 +226,7 @@ def _add_free_probes(snap: Snapshot, params: TopologyParams, cx, fence, plan: Cy
     """Append free probes to ``plan.jobs`` (see plan_cycle's free_probes): at most
     ``max_paths``, lowest frontier vertex first, each at a vertex that is neither a mover
     (push path, source, earlier free prober) nor a neighbour of one."""
-    from .paths import PushPath
+    from .topology.paths import PushPath
 
     movers: set[int] = set(int(s) for s in snap.sources)
     for job in plan.jobs:
@@ -266,13 +266,13 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
 
     The fence is recomputed on the same snapshot with ``test_drive_failures``, which now
     hold the failed direction: deployments within 30 deg of it are gone, and its side
-    closes once both ends have no room (coordinator.fence).
+    closes once both ends have no room (coordinator.topology.fence).
     busy: the other pushes of this cycle; their paths, and every neighbour of their
     frontier vertices, are not used (their occupants are moving or about to), and a lattice
     position keeps clear of their targets. exclude: further vertices no path may use.
     skip_probes: probe keys not to offer (a free probe's retry: those it drove clear).
     """
-    from .paths import plan_pushes
+    from .topology.paths import plan_pushes
 
     cx, fence = _complex_and_fence(snap, params, test_drive_failures, evidence)
     if start not in cx:
@@ -304,7 +304,7 @@ def _claimed(cx, paths) -> set[int]:
 def _job_spec(snap: Snapshot, params: TopologyParams, pth, vid: int, test_drive: bool,
               scale_correct: bool) -> JobSpec:
     """The push along ``pth`` (a paths.PushPath) deploying to new vertex ``vid``."""
-    from .targets import frontier_desired_bearings, probe_via_bearings
+    from .topology.targets import frontier_desired_bearings, probe_via_bearings
 
     dep = pth.deployment
     f = pth.frontier
@@ -348,8 +348,8 @@ def _place_on_lattice(snap: Snapshot, jobs: list[JobSpec], spacing: float,
     Each placed job's deploy bearings are re-derived for the distance chosen.
     """
     from ground.angles import wrap
-    from .shape import Lattice, align_headings, estimate_shape, lattice_target
-    from .targets import frontier_desired_bearings
+    from .topology.shape import Lattice, align_headings, estimate_shape, lattice_target
+    from .topology.targets import frontier_desired_bearings
 
     if not snap.sources or any(k != "holonomic" for k in snap.kinds.values()):
         return

@@ -10,7 +10,7 @@ from the message and checks the claim again:
 2. the frontier K is empty;
 3. over GF(2), the obstacle edges O are the boundary of a 2-chain of the message's
    triangles up to a closure inside O's one-hop closure zone, the coordinator's own
-   criterion (``coordinator.certificate``), solved again on the rebuilt complex;
+   criterion (``coordinator.topology.certificate``), solved again on the rebuilt complex;
 4. with ground truth (``positions``, the world's): every occupant is a robot of the world,
    every edge joins robots at most rv apart (with ``tol`` for motion since the cycle), and
    every edge whose triangles all lie clearly on one side of it in the world is an
@@ -96,8 +96,8 @@ def recheck(cx, positions: dict | None = None, rv: float | None = None,
     # GF(2): O must be a boundary of the message's triangles
     from types import SimpleNamespace
 
-    from coordinator.certificate import certify
-    from coordinator.complex import Complex as TopoComplex
+    from coordinator.topology.certificate import certify
+    from coordinator.topology.complex import Complex as TopoComplex
     n = len(verts)
     ids = np.asarray(verts, np.int64)
     perm = np.argsort(ids)

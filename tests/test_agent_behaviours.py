@@ -273,7 +273,7 @@ def test_diffdrive_contact_bearing_follows_rotation():
 
 @pytest.mark.parametrize("kind", ["holonomic", "diffdrive"])
 def test_probe_homes_to_its_point_on_the_edge_then_drives_perpendicular(kind):
-    """A probe (coordinator.evidence): from vertex p = (0, 0) on the edge p -> q = landmark 1
+    """A probe (coordinator.topology.evidence): from vertex p = (0, 0) on the edge p -> q = landmark 1
     at (0.8, 0), first to the point at half the edge on the bearings of q and of the apex,
     then perpendicular (down, into the open side) for 0.3: clear, it stays there."""
     sim = world(me=(0.0, 0.0, 0.0))

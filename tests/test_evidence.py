@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from coordinator import build_complex, detect_fence, wrap
-from coordinator.evidence import Evidence, probe_depth_rv, probe_fractions, probe_key
-from coordinator.params import TopologyParams
+from coordinator.topology.evidence import Evidence, probe_depth_rv, probe_fractions, probe_key
+from coordinator.topology.params import TopologyParams
 from coordinator.planner import Snapshot, plan_cycle
-from coordinator.targets import probe_via_bearings
+from coordinator.topology.targets import probe_via_bearings
 
 DEG = math.pi / 180
 

@@ -16,8 +16,8 @@ from coordinator import build_complex, detect_fence
 from coordinator.actions import SendTask
 from coordinator.config import CoordinatorConfig
 from coordinator.deployer import Deployer, Robot
-from coordinator.evidence import Evidence, probe_key
-from coordinator.params import TopologyParams
+from coordinator.topology.evidence import Evidence, probe_key
+from coordinator.topology.params import TopologyParams
 from coordinator.planner import Snapshot, plan_cycle, replan_push
 
 DEG = math.pi / 180

@@ -195,7 +195,7 @@ def test_recheck_accepts_the_pillar_hall_end_state_whose_fence_crosses_itself():
     from pathlib import Path
 
     from coordinator import build_complex, certify, detect_fence
-    from coordinator.params import TopologyParams
+    from coordinator.topology.params import TopologyParams
     d = json.loads((Path(__file__).parent / "data" / "pillar_hall_end.json").read_text())
     reps = {int(k): {"neighbours": {int(a): b for a, b in v["neighbours"].items()},
                      "touch": v["touch"],

@@ -540,7 +540,7 @@ def _contact(p, segs):
 def _drives(cx, pos, segs, fence, ev):
     """Simulated drives: each deployment drives d_td = 0.25 rv, a probe first to its point on
     the edge, then depth_rv along its bearing; one that comes within a body radius of a
-    wall fails. Outcomes go to ``ev`` (coordinator.evidence.Evidence). Returns True if a new
+    wall fails. Outcomes go to ``ev`` (coordinator.topology.evidence.Evidence). Returns True if a new
     outcome was recorded."""
     before = len(ev.records)
     done = {(r.vertex, round(r.direction, 9), r.via_frac, r.edge) for r in ev.records}
@@ -645,7 +645,7 @@ def campaign_case(seed, drop_fence_edge=False):
     P, reps, polys, W, H, segs = campaign_sample(seed)
     cx = build_complex(reps)
     pos = P[cx.index(cx.ids)]
-    from coordinator.evidence import Evidence
+    from coordinator.topology.evidence import Evidence
     ev = Evidence(door_min_rv=0.4, robot_radius_rv=0.06)
     for _ in range(12):
         fence = detect_fence(cx, **ev.fence_kwargs())
@@ -760,7 +760,7 @@ def test_a_closure_never_drops_an_edge_with_one_triangle():
     both would leave nothing, a certificate from nothing (the forged-Complex re-check of
     tests/test_run_report.py hit it). Only fold edges (two or more triangles) may leave the
     target: the closure adds the diagonal instead."""
-    from coordinator.complex import Complex as TopoComplex
+    from coordinator.topology.complex import Complex as TopoComplex
     ids = np.arange(4)
     edges = np.array([[0, 1], [0, 2], [1, 2], [1, 3], [2, 3]])
     tris = np.array([[0, 1, 2], [1, 2, 3]])

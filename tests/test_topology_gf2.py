@@ -1,10 +1,10 @@
-"""coordinator.gf2 against a dense numpy elimination over GF(2)."""
+"""coordinator.topology.gf2 against a dense numpy elimination over GF(2)."""
 from __future__ import annotations
 
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from coordinator import gf2
+from coordinator.topology import gf2
 
 
 def _dense_rank(M: np.ndarray) -> int:

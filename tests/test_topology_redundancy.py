@@ -7,7 +7,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 from coordinator import build_complex, certify, detect_fence, find_redundant, remove_robot, verify_certificate
-from coordinator.redundancy import link_is_acyclic
+from coordinator.topology.redundancy import link_is_acyclic
 from test_topology_geom import lattice, reports
 
 seeds = st.integers(min_value=0, max_value=2**32 - 1)

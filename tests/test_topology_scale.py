@@ -25,10 +25,10 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.cycle import closing_evidence, make_state  # noqa: E402
-from coordinator.complex import RobotReport, build_complex  # noqa: E402
+from coordinator.topology.complex import RobotReport, build_complex  # noqa: E402
 from coordinator.config import CoordinatorConfig  # noqa: E402
 from coordinator.planner import Snapshot, plan_cycle  # noqa: E402
-from coordinator.shape import _DENSE_MAX, _estimate_shape_dense, estimate_shape  # noqa: E402
+from coordinator.topology.shape import _DENSE_MAX, _estimate_shape_dense, estimate_shape  # noqa: E402
 
 CFG = CoordinatorConfig()
 P = CFG.topology()
@@ -150,8 +150,8 @@ def test_plan_cycle_equals_the_straightforward_computation(states, kind, monkeyp
     """The whole cycle on the current fence rules (probes, evidence), optimised against
     the straightforward paths: dense shape estimate, every report through as_report, no
     quick rejection in the redundancy pass."""
-    from coordinator import complex as cmod
-    from coordinator import redundancy, shape
+    from coordinator.topology import complex as cmod
+    from coordinator.topology import redundancy, shape
 
     _, h, tdf, ev, rep = states[kind]
     fast = _summary(_plan(snapshot(rep, h), tdf, ev))
@@ -188,7 +188,7 @@ def test_find_redundant_quick_rejection_changes_nothing(states, monkeypatch):
     """find_redundant rejects robots whose link has a cycle and no triangle without the
     link test; with that shortcut off (every robot taken for one in a 4-clique) it must
     remove the same robots, run as many tests and reroute to the same chain."""
-    from coordinator import redundancy
+    from coordinator.topology import redundancy
 
     removed_any = 0
     for cx, fence, cert in _redundancy_cases(states):
@@ -206,7 +206,7 @@ def test_find_redundant_quick_rejection_changes_nothing(states, monkeypatch):
 
 def test_four_cliques_found():
     from bench.topology import dense_swarm, reports_from_points
-    from coordinator.redundancy import _in_four_clique
+    from coordinator.topology.redundancy import _in_four_clique
 
     cx = build_complex(reports_from_points(dense_swarm(200, np.random.default_rng(2), degree=5)))
     adj = cx.adjacency_sets()

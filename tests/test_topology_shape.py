@@ -1,4 +1,4 @@
-"""The swarm's shape from bearings (coordinator.shape): recovered up to translation, with
+"""The swarm's shape from bearings (coordinator.topology.shape): recovered up to translation, with
 the scale from commanded lengths; lattice targets beyond a fence edge."""
 import math
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from coordinator.shape import Lattice, align_headings, estimate_shape, lattice_target
+from coordinator.topology.shape import Lattice, align_headings, estimate_shape, lattice_target
 
 
 def _scatter(seed: int, n: int, rv: float = 1.0):
@@ -154,7 +154,7 @@ def _lattice_snapshot(spacing=0.95, jitter=0.0, seed=0):
 
 
 def test_the_planner_sends_new_robots_to_free_lattice_points():
-    from coordinator.params import TopologyParams
+    from coordinator.topology.params import TopologyParams
     from coordinator.planner import plan_cycle
     spacing = 0.95
     snap, P = _lattice_snapshot(spacing)
@@ -186,7 +186,7 @@ def test_the_planner_sends_new_robots_to_free_lattice_points():
 
 
 def test_without_a_lattice_the_planner_keeps_the_spec_rule():
-    from coordinator.params import TopologyParams
+    from coordinator.topology.params import TopologyParams
     from coordinator.planner import plan_cycle
     snap, P = _lattice_snapshot(0.95)
     plan = plan_cycle(snap, TopologyParams(), cycle=1, redundancy=False, test_drive_failures={},
@@ -210,7 +210,7 @@ def _target(P, job):
 def test_a_push_whose_test_drive_touched_is_replanned_to_the_next_best_frontier():
     """Spec 3.4(iv): after a touch, the next-best frontier at once (same source), never the
     direction that failed, never through this cycle's other pushes or onto their targets."""
-    from coordinator.params import TopologyParams
+    from coordinator.topology.params import TopologyParams
     from coordinator.planner import JobSpec, plan_cycle, replan_push
     spacing = 0.95
     snap, P = _lattice_snapshot(spacing)

@@ -2,7 +2,7 @@
 
 Pure: no I/O, no clock, no positions. The deployer records every drive's outcome here, and
 an independent harness that executes the same drives geometrically can do the same; both
-then pass :meth:`Evidence.fence_kwargs` to :func:`coordinator.fence.detect_fence`.
+then pass :meth:`Evidence.fence_kwargs` to :func:`coordinator.topology.fence.detect_fence`.
 
 The rule it serves (spec 3.4, amendment 2026-11). A fence side whose two ENDS say "no room"
 (the test-drive rule: both ends' drives touched, or the both-touch rule: both ends rest on a
@@ -18,7 +18,7 @@ spacing s = door_min_rv - 2 * robot_radius_rv, fractions 0, 1/n, ..., 1 with n =
 (door_min_rv = 0.4, radius 0.06 rv: s = 0.28, fractions 0, 0.25, 0.5, 0.75, 1; the ends
 0 and 1 are the edge's own end points.)
 
-coordinator.fence asks only for the interior fractions (0 < f < 1): the ends' own drives
+coordinator.topology.fence asks only for the interior fractions (0 < f < 1): the ends' own drives
 or contacts made the side a candidate, and interior probes at most s apart and less than s
 from the ends cross every opening >= door_min_rv within the edge's span. A recorded probe
 with via_frac 0 (a perpendicular drive from an end) counts as a failed direction at that
@@ -36,7 +36,7 @@ from typing import Container, Mapping
 __all__ = ["ProbeKey", "DriveRecord", "Evidence", "probe_fractions", "probe_depth_rv",
            "probe_key"]
 
-# (u, v, sigma, frac): edge u < v (node ids), canonical open side sigma (coordinator.fence's
+# (u, v, sigma, frac): edge u < v (node ids), canonical open side sigma (coordinator.topology.fence's
 # convention: +1 is counter-clockwise from v as seen by u), fraction measured from u.
 ProbeKey = tuple[int, int, int, float]
 
@@ -119,7 +119,7 @@ class Evidence:
     # ---------------------------------------------------------------- recording
     def record(self, dep, touched: bool, *, direction: float | None = None,
                returned: bool = False) -> DriveRecord:
-        """Record the outcome of driving ``dep`` (a coordinator.fence.Deployment, or anything
+        """Record the outcome of driving ``dep`` (a coordinator.topology.fence.Deployment, or anything
         with its fields). ``direction`` overrides dep.bearing (the direction actually driven,
         e.g. after lattice placement). ``touched``: the drive failed with a touch before it
         found room (a touch far enough out to keep the robot there is room, not a touch).

@@ -139,7 +139,7 @@ def probe_via_bearings(
     frac: float,
 ) -> dict[int, float]:
     """Desired bearings (rad, p's body frame) at the point x = p + frac (q - p) of the edge
-    p-q: the start of a probe's perpendicular drive (coordinator.evidence).
+    p-q: the start of a probe's perpendicular drive (coordinator.topology.evidence).
 
     Bearing-only: q is seen from x where p sees it. For a common neighbour k (a triangle
     p, q, k) the angles at p and at q fix the triangle's shape (law of sines:

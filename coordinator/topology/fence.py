@@ -418,7 +418,7 @@ def detect_fence(
       * both-touch rule (spec 3.4 i): both ends rest on a wall (no neighbour within tau of
         the contact) pointing into the open side, each at least 30 deg off the edge's line.
     A candidate side becomes O (reason 'probes') only once every PROBE of it touched: at
-      the interior fractions ``probe_fracs`` (coordinator.evidence, from [coordinator]
+      the interior fractions ``probe_fracs`` (coordinator.topology.evidence, from [coordinator]
       door_min_rv and the robot's radius: 0.25, 0.5, 0.75 by default) of the edge, a drive
       that approaches that point along the edge, then goes perpendicular into the open
       side; done when its key (u, v, sigma, fraction from u) is in ``probe_failures``. The

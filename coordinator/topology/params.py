@@ -21,7 +21,7 @@ class TopologyParams:
     d_td: test-drive distance, defaults to 0.25*rv. gamma: concave-corner angle
     threshold (rad). redundancy_period: T_H, deployment cycles between redundancy passes.
 
-    Evidence rules (issue 21; measured in coordinator/fence.py's notes):
+    Evidence rules (issue 21; measured in coordinator/topology/fence.py's notes):
     corner_probes: convex-corner marks (spec 3.3 ii) only make a side a probing candidate
       (True) instead of closing it as the reported inference 'convex_corner' (False).
     clear_infers: a side whose probes are all done, some clear, while it stays one-sided,

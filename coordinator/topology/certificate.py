@@ -42,7 +42,7 @@ How it is solved (all on the complex alone, no positions):
    vectorised round by round. The residual on the (few) critical rows is then fixed
    with critical triangles through the Schur complement, computed by one transposed
    peeling pass with the critical rows packed as bits (inactivation): the forms phi.
-4. A target with odd vertices is closed by one more elimination (coordinator.gf2):
+4. A target with odd vertices is closed by one more elimination (coordinator.topology.gf2):
    z_raw + f is a boundary iff it is a cycle and its forms lie in the span of the
    critical triangles' forms, both linear in f. The Fence's shortest T-join
    (``Fence.z_repair``) is tried first when it lies in the zone.
