@@ -10,7 +10,10 @@ Tasks: a Sense with task_id >= 0 (lockstep, coordinator in the barrier) says whi
 coordinator sent last before that tick: the agent applies its tasks up to that one, in
 order, before it steps (waiting up to TASK_WAIT_S for one still in flight), and keeps later
 ones for a later tick. Otherwise tasks apply as they arrive. Holds the liveliness token
-alive/robot/N. Steering uses bearings, identities, touch and tasks only
+alive/robot/N, and avail/robot/N until its first Sense: an agent with no body yet (started
+by hand, on any host) is *available*, and the coordinator places available agents before it
+asks ``run`` for new processes. An id another agent of the swarm already holds is refused at
+start (exit 2), and an agent still without a body says so every BODILESS_NOTICE_S. Steering uses bearings, identities, touch and tasks only
 (agents/behaviours.py); the pose is never read by it.
 
 Parameters: defaults < the run config (``--run-config FILE``, else the world's config from
@@ -36,6 +39,7 @@ from .params import ROBOT_KINDS, AgentParams, ParamError, from_toml_text, parse_
 
 HEARTBEAT_S = 1.0
 TASK_WAIT_S = 2.0    # wall seconds a Sense waits for the task it announces
+BODILESS_NOTICE_S = 30.0   # wall seconds between "no body yet" notices of an available agent
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -137,9 +141,23 @@ class AgentNode:
         self.held: Sense | None = None       # a Sense waiting for its announced task
         self.held_since = 0.0
         self.task_waits = 0
+        self.avail_token = None
+        self.bodiless_since = time.monotonic()
+
+    def got_body(self) -> None:
+        """The first Sense: the world has a body for this robot; no longer available."""
+        if self.avail_token is not None:
+            try:
+                self.avail_token.undeclare()
+            except Exception:
+                pass
+            self.avail_token = None
 
     def open(self) -> None:
         s, k = self.session, self.keys
+        # available (no body yet) before alive: a coordinator that sees both in order never
+        # takes a waiting agent for a robot of its swarm; dropped with the first Sense
+        self.avail_token = s.liveliness().declare_token(k.avail(self.rid))
         self.token = s.liveliness().declare_token(k.alive("robot", self.rid))
         self.pub_cmd = publisher(s, k.cmd_vel(self.rid), block=True, express=True)
         self.pub_status = publisher(s, k.status(self.rid), block=True)
@@ -154,6 +172,7 @@ class AgentNode:
             except Exception:
                 pass
         self.subs = []
+        self.got_body()
         if self.token is not None:
             try:
                 self.token.undeclare()
@@ -208,6 +227,7 @@ class AgentNode:
                              source="agent")
                 self.pub_pose.put(relay.encode())
         if sense is not None:
+            self.got_body()
             if self.held is not None and sense.tick != self.held.tick:
                 self.skipped += 1
             self.held = None
@@ -289,6 +309,16 @@ class AgentNode:
             pass
 
 
+def id_taken(session, keys: Keys, rid: int, timeout: float = 2.0) -> bool:
+    """Does another agent of this swarm already hold robot ``rid``'s liveliness token?
+    (Ids are unique by refusal: a second agent with the same id would steer one body.)"""
+    try:
+        replies = session.liveliness().get(keys.alive("robot", rid), timeout=timeout)
+        return any(r.ok is not None for r in replies)
+    except Exception:  # no answer is no clash: the router would have known the token
+        return False
+
+
 def _check(args) -> None:
     if args.id < 0:
         raise ValueError(f"--id {args.id}: must be >= 0")
@@ -305,6 +335,11 @@ def _serve(args, session, keys, stop) -> int:
             return 2
         if stop.is_set():
             return 0
+        if id_taken(session, keys, args.id):
+            log.error("robot id %d is taken in swarm %s: another agent already holds %s; "
+                      "start this one with another --id (or let `swarmcover run` pick ids)",
+                      args.id, keys.prefix, keys.alive("robot", args.id))
+            return 2
         lockstep = world_mode(args, session, keys, stop, log) == "lockstep"
         node = AgentNode(session, keys, args.id, params, args.live, log, lockstep=lockstep)
         node.open()
@@ -323,6 +358,12 @@ def _serve(args, session, keys, stop) -> int:
                 break
             if not node.lockstep and time.monotonic() - node.last_status > HEARTBEAT_S:
                 node.publish_status()
+            if node.avail_token is not None and \
+                    time.monotonic() - node.bodiless_since > BODILESS_NOTICE_S:
+                node.bodiless_since = time.monotonic()
+                log.warning("robot %d has no body yet: available, waiting for the "
+                            "coordinator to place it (is a run going in swarm %s?)",
+                            args.id, keys.prefix)
         node.stop_robot()
         log.info("robot %d stopped: %d ticks, %d skipped or repeated, %d invalid messages, "
                  "%d behaviour errors, %d ticks without an announced task", args.id,

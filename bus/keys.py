@@ -148,6 +148,15 @@ class Keys:
     def alive_robots(self) -> str:
         return f"{self.prefix}/alive/robot/*"
 
+    def avail(self, rid: int | str) -> str:
+        """Liveliness token of an agent that has no body yet (started by hand, or by
+        ``run`` ahead of its Spawn): the coordinator places such agents before it asks for
+        new processes. The agent drops it with its first Sense."""
+        return f"{self.prefix}/avail/robot/{rid}"
+
+    def avail_robots(self) -> str:
+        return f"{self.prefix}/avail/robot/*"
+
     @property
     def all(self) -> str:
         return f"{self.prefix}/**"

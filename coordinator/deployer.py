@@ -130,6 +130,12 @@ class Deployer:
         self.redundant: set[int] = set()             # vertices
         self.left: set[int] = set()                  # robots sent away (redundant, idle)
         self.next_robot = 0
+        # agents up without a body (avail/robot/<id>: started by hand, any host), placed
+        # before new robots are asked for; lowest id first
+        self.available: set[int] = set()
+        self.joined = 0                              # robots placed from self.available
+        self.firsts: list[int] = []                  # the first robot at each source
+        self.spawned: set[int] = set()               # ids this deployer asked bodies for
         self.next_vertex = len(self.sources)
         self.next_task = 1
         self.cycle = 0
@@ -158,7 +164,25 @@ class Deployer:
         self.started = False
 
     # ------------------------------------------------------------------ events
+    def on_available(self, rid: int, present: bool) -> None:
+        """An agent with no body came (``present``) or went, or got its body. Until it is
+        placed it is no robot of the swarm: its liveliness and statuses are not counted."""
+        if not present:
+            self.available.discard(rid)
+            return
+        r = self.robots.get(rid)
+        if r is not None and (rid in self.vertex_of or rid in self.spawned or r.dead):
+            return  # ours already: the token outlived the body's first Sense
+        if r is not None:  # its alive token or first status came first
+            del self.robots[rid]
+        self.available.add(rid)
+        self.next_robot = max(self.next_robot, rid + 1)
+        log.info("robot %d is available (an agent without a body): %d waiting",
+                 rid, len(self.available))
+
     def on_status(self, st: Status) -> None:
+        if st.robot in self.available:
+            return
         r = self.robots.get(st.robot)
         if r is None:
             kind, live = self.robot_kind(st.robot)
@@ -213,6 +237,10 @@ class Deployer:
                    for j in self.jobs for s in j.steps)
 
     def on_alive(self, rid: int, present: bool, now: float) -> None:
+        if rid in self.available:
+            if not present:
+                self.available.discard(rid)
+            return
         r = self.robots.get(rid)
         if present:
             if r is None:
@@ -272,13 +300,12 @@ class Deployer:
             self._set_phase(Phase.EXECUTE, now)  # wait for running tasks, then plan
             return
         if not known and now - self.phase_t >= 1.0:
-            for k in range(len(self.sources)):
-                self._spawn(k, now)
+            self.firsts = [self._spawn(k, now) for k in range(len(self.sources))]
             self._set_phase(Phase.FIRST, now)
 
     def _phase_first(self, now: float) -> None:
         """Wait until the first robot(s) report, then make them hold the source vertices."""
-        firsts = [self.robots.get(k) for k in range(len(self.sources))]
+        firsts = [self.robots.get(rid) for rid in self.firsts]
         if all(r is not None and r.status is not None for r in firsts):
             for k, r in enumerate(firsts):
                 self.vertex_of[r.rid] = k
@@ -1100,8 +1127,20 @@ class Deployer:
         return task.task_id
 
     def _spawn(self, source: int, now: float) -> int:
-        rid = self.next_robot
-        self.next_robot += 1
+        """A new robot at ``source``: an available agent if there is one (lowest id), else
+        a new id for ``run`` to start an agent under."""
+        if self.available:
+            rid = min(self.available)
+            self.available.discard(rid)
+            self.joined += 1
+            log.info("placing available robot %d at source %d (%d more waiting)", rid, source,
+                     len(self.available))
+        else:
+            rid = self.next_robot
+            while rid in self.robots:
+                rid += 1
+            self.next_robot = rid + 1
+        self.spawned.add(rid)
         kind, live = self.robot_kind(rid)
         self.robots[rid] = Robot(rid, kind=kind, live=live, spawned_t=now)
         self._out.append(SpawnRobot(Spawn(robot=rid, source=source, kind=kind, live=live)))
@@ -1159,5 +1198,6 @@ class Deployer:
                     robots_spawned=len(self.robots), robots_alive=len(alive),
                     robots_in_complex=len(self._members()), robots_left=len(self.left),
                     failures=self.failures, failures_healed=self.failures_healed,
-                    test_drive_retries=self.retried,
+                    test_drive_retries=self.retried, robots_joined=self.joined,
+                    robots_available=len(self.available),
                     stop_reason=self.stop_reason)

@@ -213,6 +213,7 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
     subs = [
         session.declare_subscriber(keys.status("*"), mb.callback),
         session.declare_subscriber(keys.clock, mb.callback),
+        session.liveliness().declare_subscriber(keys.avail_robots(), mb.callback, history=True),
         session.liveliness().declare_subscriber(keys.alive_robots(), mb.callback, history=True),
     ]
     token = session.liveliness().declare_token(keys.alive("coordinator", "main"))
@@ -320,6 +321,13 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
             items = ([item] if item else []) + mb.drain()
             for key, payload, kind in items:
                 rel = keys.relative(key)
+                if rel.startswith("avail/robot/"):
+                    # an agent without a body (joined by hand): outside the barrier, as it
+                    # comes (hand-joined agents make a lockstep run unrepeatable anyway)
+                    rid = keys.robot_id(key)
+                    if rid is not None:
+                        dep.on_available(rid, kind == zenoh.SampleKind.PUT)
+                    continue
                 if rel.startswith("alive/robot/"):
                     rid = keys.robot_id(key)
                     if rid is None:

@@ -472,6 +472,7 @@ class RunState:
     truths: dict = dataclasses.field(default_factory=dict)   # recent ground truth by tick
     info: WorldInfo | None = None
     spawned: int = 0
+    joined: int = 0          # robots placed from agents that joined by hand
     restarts: int = 0
     epochs: dict = dataclasses.field(default_factory=dict)   # epoch -> [last cycle, healed]
     refused: dict = dataclasses.field(default_factory=dict)  # "complex: why" -> count
@@ -676,6 +677,7 @@ def _write_report(args, cfg, wmap, out: Path, state: RunState, t_wall0: float) -
                  stop_detail=state.detail, cycles=state.cycles,
                  sim_time_s=(truth.t if truth else 0.0),
                  wall_time_s=time.monotonic() - t_wall0, robots_spawned=state.spawned,
+                 robots_joined=state.joined,
                  failures_healed=state.failures_healed, coordinator_restarts=state.restarts,
                  certificate_recheck=state.recheck,
                  refused_messages=dict(sorted(state.refused.items())),
@@ -814,7 +816,10 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
             session.declare_subscriber(keys.complex, inbox.callback),
             session.declare_subscriber(keys.truth, inbox.callback),
             session.liveliness().declare_subscriber(keys.alive("coordinator", "*"),
-                                                     inbox.callback, history=True)]
+                                                     inbox.callback, history=True),
+            session.liveliness().declare_subscriber(keys.avail_robots(), inbox.callback,
+                                                     history=True)]
+    available: set[int] = set()     # agents up without a body (joined by hand, any host)
     robots_max = int(state.limits.get("robots_max") or 400)
     spawn_cap = robots_max + 8      # live agent processes; a few more for races and refills
     stall = StallWatch(robots_max)
@@ -851,6 +856,12 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                 rel = keys.relative(key)
                 if rel.startswith("alive/coordinator/"):
                     coord.token = kind == zenoh.SampleKind.PUT
+                elif rel.startswith("avail/robot/"):
+                    rid = keys.robot_id(key)
+                    if rid is not None and kind == zenoh.SampleKind.PUT:
+                        available.add(rid)
+                    elif rid is not None:
+                        available.discard(rid)
                 elif rel == "world/spawn":
                     sp = rx.decode(key, payload, Spawn)
                     if sp is None:
@@ -864,6 +875,12 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                         why = f"{spawn_cap} agents running (robots_max {robots_max} + 8)"
                     if why:
                         state.refuse("spawn", why)
+                        continue
+                    if sp.robot in available and not sp.live:
+                        # placed from the agents that joined by hand: it has a process
+                        log.info("robot %d: the coordinator placed an agent that joined by "
+                                 "hand (no process started)", sp.robot)
+                        state.joined += 1
                         continue
                     launcher.start(name, _agent_args(sp, conf_path, live_limits))
                     unready[name] = 0.0
@@ -892,10 +909,12 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                                certified=cx.certified, coverage=coverage, state=cx.state)
                     cycles_f.write(strict_json(row) + "\n")
                     cycles_f.flush()
+                    waiting = sum(1 for r in available if f"agent-{r}" not in launcher.children)
                     progress.set(total, note=(
                         f"cycle {total} | robots {cx.robots}/{robots_max} | frontier "
                         f"{len(cx.frontier)} | obstacle {len(cx.obstacle)} | covered "
-                        f"{100 * coverage:.1f}% | sim {cx.t:.0f}s"))
+                        f"{100 * coverage:.1f}% | sim {cx.t:.0f}s"
+                        + (f" | {waiting} joined, no body yet" if waiting else "")))
                     if cx.state == "certified":
                         pending_cert = (cx, time.monotonic())
                     elif cx.state == "stopped":

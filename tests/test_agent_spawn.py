@@ -117,3 +117,42 @@ def test_supervisor_start_poll_stop(zargs):
         assert sup.stop(4, timeout=15) == 0
         sup.start(8, stdout=open(os.devnull, "w"))
     assert sup.running() == {} and not sup.children
+
+
+def test_a_second_agent_with_a_taken_id_is_refused_naming_the_id(procs, zargs):
+    """Issue 18: ids are unique by refusal. A second agent with a held id exits 2 at once,
+    naming the id and the swarm; the first keeps running."""
+    first = procs.swarmcover("agent", "--id", "4", "--info-timeout", "0", *zargs)
+    first.wait_line("READY agent 4 ", timeout=45)
+    t0 = time.monotonic()
+    second = procs.swarmcover("agent", "--id", "4", "--info-timeout", "0", *zargs)
+    rc = second.wait(30)
+    assert rc == 2, second.output()
+    assert time.monotonic() - t0 < 20
+    out = second.output()
+    assert "robot id 4 is taken" in out and zargs[zargs.index("--swarm") + 1] in out, out
+    assert "Traceback" not in out
+    assert first.p.poll() is None
+
+
+def test_an_agent_without_a_body_is_available_until_its_first_sense(procs, zargs, router):
+    """An agent started by hand holds avail/robot/<id> (and alive/robot/<id>) while it has
+    no body, so a coordinator can place it; a world's Sense for it ends availability."""
+    from bus.messages import Sense
+    swarm = zargs[zargs.index("--swarm") + 1]
+    keys = Keys(swarm)
+    a = procs.swarmcover("agent", "--id", "11", "--info-timeout", "0", *zargs)
+    a.wait_line("READY agent 11 ", timeout=45)
+    s = client_session(router, swarm)
+    try:
+        def held(key):
+            return any(r.ok is not None for r in s.liveliness().get(key, timeout=2.0))
+        assert held(keys.avail(11)) and held(keys.alive("robot", 11))
+        s.put(keys.sense(11), Sense(robot=11, tick=1, t=0.05).encode())
+        end = time.monotonic() + 10
+        while time.monotonic() < end and held(keys.avail(11)):
+            time.sleep(0.1)
+        assert not held(keys.avail(11)), "still available after its first Sense"
+        assert held(keys.alive("robot", 11))
+    finally:
+        s.close()

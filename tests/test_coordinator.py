@@ -53,6 +53,33 @@ def test_first_cycle_spawns_then_holds_then_deploys_the_lone_robot():
     assert td and td[0].kind == "test_drive" and td[0].direction == pytest.approx(0.5)
 
 
+def test_agents_that_joined_by_hand_are_placed_first_and_not_counted_before():
+    """Issue 18: an agent with no body (avail/robot/<id>) is no robot of the swarm until the
+    coordinator places it, and it is placed before a new id is asked for; its alive token or
+    status arriving before its avail token does not make it one either."""
+    dep = Deployer(CoordinatorConfig(), sources=[0.5])
+    dep.on_alive(42, True, 0.0)          # alive first (token order is not guaranteed) ...
+    dep.on_status(Status(robot=42, seq=1, t=0.0, state="starting", vertex=-1))
+    dep.on_available(42, True)           # ... then available: taken back out of the swarm
+    dep.on_available(9, True)
+    dep.on_alive(9, True, 0.0)
+    dep.on_status(Status(robot=9, seq=1, t=0.0, state="starting", vertex=-1))
+    assert 42 not in dep.robots and 9 not in dep.robots and dep.available == {9, 42}
+    acts = dep.step(0.0) + dep.step(1.5)
+    spawns = [a.spawn for a in acts if isinstance(a, SpawnRobot)]
+    assert [s.robot for s in spawns] == [9] and spawns[0].source == 0   # lowest id first
+    assert dep.available == {42} and 9 in dep.robots and dep.joined == 1
+    dep.on_status(Status(robot=9, seq=2, t=1.6, state="idle"))
+    acts = dep.step(1.6)
+    (task,) = [a.task for a in acts if isinstance(a, SendTask)]
+    assert task.kind == "hold" and task.robot == 9        # the first robot is the one placed
+    dep.on_available(9, False)           # its first Sense: no change, it is ours
+    dep.on_available(42, False)          # the other one went away while waiting
+    assert dep.available == set() and 9 in dep.robots
+    assert dep._spawn(0, 2.0) == 43      # new ids never reuse one seen
+    assert dep.summary()["robots_joined"] == 1
+
+
 @pytest.mark.timeout(480)
 @pytest.mark.parametrize("config", [
     "configs/small.toml",

@@ -221,3 +221,28 @@ def test_run_with_shared_flags_reaches_every_process(procs, tmp_path):
     s = json.loads((out / "summary.json").read_text(), parse_constant=lambda c: 1 / 0)
     assert s["certified"] and s["stop_reason"] == "certified"
     no_leftovers(out)
+
+
+@pytest.mark.timeout(300)
+def test_agents_started_by_hand_join_a_run_and_are_used(procs, tmp_path, router):
+    """Issue 18: agents started by hand before the run (``swarmcover spawn``, any terminal or
+    host) are available; the coordinator places them before it asks run for new processes,
+    run starts no process for them, and the run certifies using them."""
+    import uuid
+    swarm = "j" + uuid.uuid4().hex[:8]
+    hand = procs.swarmcover("spawn", "3", "--first-id", "100", "--info-timeout", "60",
+                            "--connect", router, "--swarm", swarm)
+    hand.wait_line("READY spawn 3", timeout=30)
+    out = tmp_path / "run"
+    p = procs.swarmcover("run", "configs/tiny.toml", "--router", router, "--swarm", swarm,
+                         "--out", str(out), "--quiet")
+    assert p.wait(280) == 0, p.output()[-3000:]
+    s = _summary(out)
+    assert s["certified"] is True and s["coverage"] >= 0.99
+    assert s["robots_joined"] == 3 and s["robots_spawned"] >= 1
+    coord = (out / "logs" / "coordinator.log").read_text()
+    for rid in (100, 101, 102):
+        assert f"placing available robot {rid} " in coord, coord[-2000:]
+        assert not (out / "logs" / f"agent-{rid}.log").exists()   # run started none of them
+    # the hand-started agents drove: they got tasks from the coordinator
+    assert "swarmcover.agent.100: task" in hand.output(), hand.output()[-2000:]
