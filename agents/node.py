@@ -32,7 +32,8 @@ from pathlib import Path
 from bus.keys import Keys
 from bus.messages import CmdVel, Pose, Sense, Task
 from bus.node import ready, run_node
-from bus.session import Mailbox, Receiver, Shutdown, add_zenoh_args, publisher, query_world_info
+from bus.session import (Mailbox, Receiver, Shutdown, add_zenoh_args, publisher, query_world_info,
+                         undeclare)
 
 from .behaviours import Behaviour
 from .params import ROBOT_KINDS, AgentParams, ParamError, from_toml_text, parse_override
@@ -146,12 +147,8 @@ class AgentNode:
 
     def got_body(self) -> None:
         """The first Sense: the world has a body for this robot; no longer available."""
-        if self.avail_token is not None:
-            try:
-                self.avail_token.undeclare()
-            except Exception:
-                pass
-            self.avail_token = None
+        undeclare(self.avail_token)
+        self.avail_token = None
 
     def open(self) -> None:
         s, k = self.session, self.keys
@@ -166,19 +163,8 @@ class AgentNode:
             self.subs.append(s.declare_subscriber(key, self.mailbox.callback))
 
     def close(self) -> None:
-        for sub in self.subs:
-            try:
-                sub.undeclare()
-            except Exception:
-                pass
-        self.subs = []
-        self.got_body()
-        if self.token is not None:
-            try:
-                self.token.undeclare()
-            except Exception:
-                pass
-            self.token = None
+        undeclare(*self.subs, self.avail_token, self.token)
+        self.subs, self.avail_token, self.token = [], None, None
 
     def _invalid(self, key: str, why: str) -> None:
         self.rx.invalid[key] += 1

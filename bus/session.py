@@ -333,6 +333,18 @@ def publisher(session: zenoh.Session, key: str, *, block: bool = True, express: 
     return session.declare_publisher(key, **kw)
 
 
+def undeclare(*entities) -> None:
+    """Undeclare Zenoh subscribers, publishers and liveliness tokens (None skipped), each on
+    its own: one that fails (its session already closed) does not keep the others."""
+    for e in entities:
+        if e is None:
+            continue
+        try:
+            e.undeclare()
+        except Exception:
+            pass
+
+
 def put(session: zenoh.Session, key: str, msg: Message, *, block: bool = True) -> None:
     """One-off put of a message (commands use BLOCK)."""
     session.put(key, msg.encode(), congestion_control=(

@@ -39,6 +39,7 @@ from pathlib import Path
 
 from bus import messages as m
 from bus.keys import Keys
+from bus.session import undeclare
 
 import viz as _viz
 from viz.coverage import coverage_measure, map_bounds, polygon_xy
@@ -416,11 +417,7 @@ class ViewServer:
             except Exception:
                 pass
             self.fox_server = None
-        for s in self._subs:
-            try:
-                s.undeclare()
-            except Exception:
-                pass
+        undeclare(*self._subs)
         self._subs.clear()
         if self._http_thread is not None:
             self.httpd.shutdown()
