@@ -213,7 +213,8 @@ class AgentNode:
                              source="agent")
                 self.pub_pose.put(relay.encode())
         if sense is not None:
-            self.got_body()
+            if self.avail_token is not None:  # once: per-Sense work is the swarm's budget
+                self.got_body()
             if self.held is not None and sense.tick != self.held.tick:
                 self.skipped += 1
             self.held = None

@@ -312,7 +312,8 @@ class Deployer:
                 self._send(r.rid, Task(kind="hold", vertex=k, timeout_s=self.cfg.task_timeout_s), now)
             self._set_phase(Phase.EXECUTE, now)
         elif now - self.phase_t > self.cfg.spawn_timeout_s:
-            self._stop("first robot never reported (is an agent started for robot 0?)")
+            self._stop(f"first robot never reported (is an agent started for robot "
+                       f"{', '.join(map(str, self.firsts))}?)")
 
     def _phase_execute(self, now: float) -> None:
         for rid, k in list(self.pending_holds.items()):
