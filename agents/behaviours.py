@@ -106,6 +106,7 @@ class Behaviour:
         self.home_mark = 0.0            # dead-reckoned advance when homing started (m)
         self.return_goal: dict[int, float] | None = None  # test drive: re-home after reversing
         self.return_reason = "touch"    # test drive: the failure reason once back home
+        self.touch_offset = 0.0         # test drive: touch sector centre - direction driven (rad)
         self.contact_moved = 0.0
         # homing
         self.stop = StopRule(p.arrive, p.arrive_ticks, p.error_alpha)
@@ -228,7 +229,8 @@ class Behaviour:
                     task_state=self.task_state, reason=self.reason,
                     progress=min(1.0, max(0.0, self.progress)), nbr_ids=ids,
                     nbr_bearings=bearings, contact=self.contact,
-                    contact_bearing=wrap(cb) if self.contact else 0.0)
+                    contact_bearing=wrap(cb) if self.contact else 0.0,
+                    touch_offset=self.touch_offset)
 
     # ================================================================== internals
 
@@ -369,6 +371,7 @@ class Behaviour:
             self.contact_pinned = False
             self._set_state("test_driving")
             self.return_reason = "touch"
+            self.touch_offset = 0.0
             via = {l: b for l, b in zip(task.via_landmarks, task.via_bearings) if l != self.robot}
             if len(via) >= 2:
                 # a probe: home to the point on the edge first (bearing-only, spec 4.5)
@@ -620,6 +623,10 @@ class Behaviour:
                 self.contact_pinned = True
                 self._finish("done", "wall")
                 return 0.0, 0.0
+            # the blocking sector nearest the direction driven: the wall's normal is within
+            # tau of its centre, which the fence uses to re-drive the probe along it
+            self.touch_offset = min((wrap(c - d) for c in self.obst if blocks(d, c, p.tau)),
+                                    key=abs)
             self._test_touch()
             return self._ticks[self.mode]()
         if self.single is not None and self.n - self.last_seen.get(self.single, -10**9) \

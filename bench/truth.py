@@ -61,6 +61,7 @@ RV = 1.0
 RADIUS = 0.06
 D0 = 0.9 * RV
 WALL_KEEP = 0.45 * RV
+N_TOUCH = 8          # touch sectors, centred on body bearings 2 pi k / N_TOUCH (the world's)
 NOISE_DEG = 0.5
 KINDS = ("rect", "L", "boxes", "clutter", "two_rooms")
 KIND_P = (0.14, 0.14, 0.14, 0.14, 0.44)
@@ -316,7 +317,9 @@ class Outcome:
     """One executed deployment: ``result`` is 'clear' (new robot at the drive's end),
     'wall' (new robot resting at a wall past wall_keep), 'touch' (failed, nothing
     placed) or 'unreached' (a probe's approach leg touched). ``direction`` is the bearing
-    driven in the deploying robot's body frame."""
+    driven in the deploying robot's body frame. ``contact_offset`` (touch only): the
+    centre of the touch sector the contact fell in, minus the direction driven (rad), as
+    the agent reports it (Status.touch_offset)."""
 
     vertex: int
     direction: float
@@ -325,6 +328,7 @@ class Outcome:
     travelled: float
     new_robot: int | None = None
     deployment: object = None
+    contact_offset: float = 0.0
 
 
 def execute(sw: Swarm, dep) -> Outcome:
@@ -351,7 +355,12 @@ def execute(sw: Swarm, dep) -> Outcome:
     if cdir is None:
         return Outcome(i, float(dep.bearing), kind, "clear", trav, sw.add(end), dep)
     if trav < WALL_KEEP:
-        return Outcome(i, float(dep.bearing), kind, "touch", trav, None, dep)
+        # the robot feels the contact in a touch sector of its body: only the sector's
+        # centre is known (within pi / N_TOUCH of the contact's direction)
+        w = 2.0 * math.pi / N_TOUCH
+        centre = round(sw.body(i, cdir) / w) * w
+        return Outcome(i, float(dep.bearing), kind, "touch", trav, None, dep,
+                       _wrap(centre - float(dep.bearing)))
     return Outcome(i, float(dep.bearing), kind, "wall", trav, sw.add(end, contact=cdir), dep)
 
 
@@ -379,7 +388,8 @@ class Feedback:
             if o.result == "unreached":
                 self._ev.record_unreached(o.deployment)
             else:
-                self._ev.record(o.deployment, touched=(o.result == "touch"))
+                self._ev.record(o.deployment, touched=(o.result == "touch"),
+                                contact_offset=o.contact_offset)
             return
         if o.result == "touch":
             self.failures.setdefault(o.vertex, []).append(o.direction)

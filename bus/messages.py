@@ -370,6 +370,9 @@ class Status(Message):
     nbr_ids/nbr_bearings: neighbours seen now (filtered while still), body frame (rad).
     contact/contact_bearing: sticky obstacle contact (spec 3.5), body frame (rad).
     pose: [x, y, theta] as reported by the robot's body (telemetry only, may be []).
+    touch_offset: a test drive that failed with "touch": the angle (rad, CCW) from the
+      direction driven to the centre of the touch sector that stopped it; the wall's normal
+      lies within tau of that centre (coordinator.topology.evidence). 0 otherwise.
     """
     robot: int = f_int(0)
     seq: int = f_int(0)
@@ -388,6 +391,7 @@ class Status(Message):
     contact_bearing: float = f_float(**ANGLE)
     pose: list = f_floats(-1e6, 1e6)
     tick: int = f_int(-1, default=-1, optional=True)   # the Sense tick it answers; -1: none
+    touch_offset: float = f_float(**ANGLE, optional=True)
 
     def _post_check(self):
         if len(self.pose) not in (0, 3):

@@ -79,6 +79,7 @@ class Step:
     reason: str = ""
     started_t: float = 0.0
     n_landmarks: int = -1         # landmarks of the goto/hold task it was started with
+    touch_offset: float = 0.0     # failed test drive: touch sector centre - direction (rad)
 
 
 @dataclass
@@ -808,6 +809,7 @@ class Deployer:
                         self._step_done(job, s)
                     elif st.task_state == "failed":
                         s.state, s.reason = "failed", st.reason
+                        s.touch_offset = st.touch_offset
                         self._step_done(job, s)
 
     def _step_done(self, job: PushJob, s: Step) -> None:
@@ -850,21 +852,23 @@ class Deployer:
             # contact was felt where the robot touched, up to wall_keep_rv out, not at the
             # vertex (a door jamb felt "above" is ahead and to the side): on_status keeps it
             # in td_contacts, never as a wall the robot at the vertex rests against
-            self._record(spec, touched=True)
+            self._record(spec, touched=True, contact_offset=td.touch_offset)
             log.info("cycle %d: test drive from vertex %d touched an obstacle: fence side "
                      "of %s -> O", self.cycle, spec.path[-1], spec.frontier_edge)
             if td.reason == "touch" and self._retry(job):
                 return
         self._cancel(job, "test drive touched an obstacle")
 
-    def _record(self, spec, touched: bool) -> None:
-        """Book a drive's outcome (coordinator.topology.evidence): the direction actually driven."""
+    def _record(self, spec, touched: bool, contact_offset: float = 0.0) -> None:
+        """Book a drive's outcome (coordinator.topology.evidence): the direction actually
+        driven, and for a touch the agent's touch_offset (sector centre - direction)."""
         dep = spec.deployment
         if dep is None:
             if touched:
                 self.evidence.add_failed_direction(spec.path[-1], float(spec.direction))
             return
-        self.evidence.record(dep, touched, direction=float(spec.direction))
+        self.evidence.record(dep, touched, direction=float(spec.direction),
+                             contact_offset=contact_offset)
 
     def _retry(self, job: PushJob) -> bool:
         """Re-plan a push whose test drive touched, within this cycle (spec 3.4(iv): the

@@ -191,6 +191,25 @@ def test_test_drive_touch_returns_and_fails_with_contact(with_landmarks):
     assert beh.status()["contact"]
 
 
+@pytest.mark.parametrize("direction, offset", [(PI / 2, 0.0), (PI / 3, PI / 6), (2 * PI / 3, -PI / 6)])
+def test_test_drive_touch_reports_the_sector_off_the_direction_driven(direction, offset):
+    """A test drive stopped by a wall reports where the touch sector that stopped it lies,
+    relative to the direction driven: the wall's normal is within tau of it, and the fence
+    re-drives an oblique probe along it (coordinator.topology.evidence)."""
+    wall = ((-3, 0.15), (3, 0.15))
+    sim = world(me=(0.0, 0.0, 0.0), walls=[wall])
+    beh = Behaviour(AgentParams(), ME)
+    beh.on_task(task("test_drive", direction=direction, distance=0.3))
+    assert run(beh, sim, ME, 400, until=lambda: beh.task_state != "running")
+    st = status_ok(beh)
+    assert st["task_state"] == "failed" and st["reason"] == "touch"
+    assert st["touch_offset"] == pytest.approx(offset, abs=1e-9)
+    # the next test drive starts with no offset
+    beh.on_task(task("test_drive", tid=2, direction=-PI / 2, distance=0.1))
+    run(beh, sim, ME, 1)
+    assert status_ok(beh)["touch_offset"] == 0.0
+
+
 def test_goto_slides_along_a_wall():
     """The goal lies beyond a wall: the robot slides along it instead of stopping."""
     wall = ((-3, 0.3), (3, 0.3))

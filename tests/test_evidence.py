@@ -13,7 +13,10 @@ import numpy as np
 import pytest
 
 from coordinator import build_complex, detect_fence, wrap
-from coordinator.topology.evidence import Evidence, probe_depth_rv, probe_fractions, probe_key
+from hypothesis import assume, given, settings, strategies as st
+
+from coordinator.topology.evidence import (Evidence, probe_depth_rv, probe_fractions, probe_key,
+                                           tilted_door_rv)
 from coordinator.topology.params import TopologyParams
 from coordinator.planner import Snapshot, plan_cycle
 from coordinator.topology.targets import probe_via_bearings
@@ -60,6 +63,89 @@ def test_probe_fractions_pass_every_opening_at_least_door_min_wide():
             for a in np.linspace(0.0, L - dmin, 23):
                 lines = [f * L for f in fr]
                 assert any(a + r <= x <= a + dmin - r for x in lines), (dmin, L, a)
+
+
+@settings(max_examples=300, deadline=None)
+@given(f=st.floats(0.02, 0.98), tilt=st.floats(-1.2, 1.2), d0=st.floats(0.5, 1.0))
+def test_a_tilted_probe_ends_within_d0_of_both_ends(f, tilt, d0):
+    """Edge from (0, 0) to (1, 0) (x rv), probe from (f, 0) leaning sin(tilt) toward x = 1:
+    its end point stays within d0 of both ends unless held at the floor of d0 / 4 (a start
+    point already within d0 of both)."""
+    assume(max(f, 1.0 - f) < d0)
+    t = probe_depth_rv(f, d0, 0.45, lean=math.sin(tilt))
+    end = (f + t * math.sin(tilt), t * math.cos(tilt))
+    if t > 0.25 * d0 + 1e-12:
+        assert math.hypot(*end) <= d0 + 1e-9 and math.hypot(end[0] - 1.0, end[1]) <= d0 + 1e-9
+    assert probe_depth_rv(f, d0, 0.45, lean=0.0) == probe_depth_rv(f, d0, 0.45)
+
+
+def test_the_tilted_guarantee_follows_from_the_gaps_and_tau():
+    # gaps 0.25, robot 0.12 wide, lines within tau + tilt_min of the wall's normal
+    tilt_min = TopologyParams().tilt_min
+    assert tilted_door_rv(probe_fractions(0.4, 0.06), 0.06, math.pi / 8, tilt_min) == \
+        pytest.approx(0.37 / math.cos(math.pi / 8 + tilt_min))
+    assert 0.40 < tilted_door_rv(probe_fractions(0.4, 0.06), 0.06, math.pi / 8, tilt_min) < 0.42
+
+
+def _tilted(f):
+    return [d for d in _probes(f) if d.tilt != 0.0]
+
+
+def test_a_probe_that_touched_an_oblique_wall_is_driven_again_along_its_normal():
+    """bench/truth.py seed 1, maps 267 and 496: perpendicular probe lines passed 0.43-0.44
+    rv doors in walls at 45 deg to the edge with less than the robot's width to spare, and
+    the rooms behind were certified. A probe whose touch sector lies off the direction
+    driven is driven again from the same point along that sector's centre."""
+    P, rep, _ = _door_pair(0.8)
+    cx = build_complex(rep)
+    e = int(cx.edge_index(0, 1))
+    ev = Evidence()
+    f = detect_fence(cx, **ev.fence_kwargs())
+    first = {d.via_frac: d for d in _probes(f) if d.vertex == 0}
+    assert set(first) == {0.25, 0.5, 0.75} and not _tilted(f)
+    for frac, d in first.items():
+        # the middle one felt a wall 45 deg off its line; the others nearly head-on
+        ev.record(d, touched=True, contact_offset=(45 if frac == 0.5 else 2) * DEG)
+    f = detect_fence(cx, **ev.fence_kwargs())
+    todo = _probes(f)
+    assert todo and all(d.tilt == pytest.approx(45 * DEG) for d in todo)
+    assert {d.vertex for d in todo} == {0, 1} and {probe_key(d.vertex, d.edge, d.sigma, d.via_frac)[3] for d in todo} == {0.5}
+    perp = {d.vertex: wrap(cx.bearing(d.vertex, 1 - d.vertex) + (1 if d.vertex == 0 else -1) * d.sigma * math.pi / 2)
+            for d in todo}
+    for d in todo:
+        assert wrap(d.bearing - perp[d.vertex]) == pytest.approx(45 * DEG)
+    assert e in f.frontier.tolist()
+    # the tilted drive found room: the side never closes on evidence
+    ev2 = Evidence()
+    ev2.records, ev2._probes, ev2._offsets = list(ev.records), set(ev._probes), dict(ev._offsets)
+    ev2.record(todo[0], touched=False)
+    assert _open_or_inferred_clear(detect_fence(cx, **ev2.fence_kwargs()), e)
+    # it touched too: closed on evidence
+    ev.record(todo[0], touched=True, contact_offset=0.0)
+    f = detect_fence(cx, **ev.fence_kwargs())
+    assert e in f.obstacle.tolist() and f.by_index[e].sides[0].why == "probes" and not f.inferred
+
+
+def test_ends_resting_on_an_oblique_wall_tilt_every_probe_along_its_normal():
+    """Ends whose wall contacts point 45 deg off the perpendicular (an edge cutting a
+    corner): every interior probe that touched is driven again along that wall's normal."""
+    P, _, _ = _door_pair(0.8)
+    rep = _reports(P, touch={0: 135 * DEG, 1: 135 * DEG})
+    cx = build_complex(rep)
+    e = int(cx.edge_index(0, 1))
+    ev = Evidence()
+    for _ in range(3):
+        f = detect_fence(cx, **ev.fence_kwargs())
+        for d in [d for d in _probes(f) if d.tilt == 0.0]:
+            ev.record(d, touched=True, contact_offset=0.0)
+    f = detect_fence(cx, **ev.fence_kwargs())
+    todo = _probes(f)
+    assert {round(d.via_frac if d.vertex == 0 else 1 - d.via_frac, 3) for d in todo} == {0.25, 0.5, 0.75}
+    assert all(d.tilt == pytest.approx(45 * DEG, abs=1e-6) for d in todo)
+    for d in todo:
+        ev.record(d, touched=True, contact_offset=0.0)
+    f = detect_fence(cx, **ev.fence_kwargs())
+    assert e in f.obstacle.tolist() and f.by_index[e].sides[0].why == "probes"
 
 
 def _door_pair(door):

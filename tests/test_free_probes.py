@@ -69,7 +69,8 @@ def test_a_returned_probe_is_no_evidence_and_keeps_its_side_open():
     ev.record(mid, touched=False, returned=True)
     assert ev.returned_probes() == {k} and not ev.clear_probes() and not ev.failed_probes()
     assert set(ev.fence_kwargs()) == {"test_drive_failures", "probe_failures", "probe_clear",
-                                      "probe_unreachable", "probe_fracs"}
+                                      "probe_unreachable", "probe_fracs", "probe_offsets",
+                                      "tilt_failures"}
     # every other probe touches: the side stays frontier, the returned one still offered
     # (a recorded CLEAR probe would now close it as the inference 'probe_clear')
     for d in probes:

@@ -172,3 +172,18 @@ def test_sample_maps_reach_an_end(sample):
     bad = [(r["index"], r["kind"], r["end"], r["robots"], r["livelock"][:1])
            for r in rows if r["end"] not in ("fixed", "stuck")]
     assert not bad, f"{len(bad)} maps never ended (index, kind, end, robots, repeated deployment): {bad}"
+
+
+@pytest.mark.parametrize("seed, index", [(1, 267), (1, 496)])
+def test_oblique_doors_at_corners_are_found(seed, index):
+    """bench/truth.py seed 1, maps 267 and 496: 0.43-0.44 rv doors next to a room's corner,
+    behind fence edges cutting the corner at about 45 deg. Perpendicular probe lines crossed
+    them with less than the robot's width to spare, and the rooms behind (7.5 m^2 on map
+    267) were certified uncovered. Probes are now driven again along the wall normals the
+    side's robots felt (coordinator.topology.evidence)."""
+    case = truth.make_map(seed, index)
+    assert case.kind == "two_rooms" and 0.4 * RV <= case.door_w < 0.45 * RV
+    row = truth.run_map(case)
+    assert row["end"] in ("fixed", "stuck")
+    assert not row["false_certificate"], (row["coverage"], row["hole_area"],
+                                          [h["reason"] for h in row["hid_by"][:4]])

@@ -21,6 +21,18 @@ spacing s = door_min_rv - 2 * robot_radius_rv, fractions 0, 1/n, ..., 1 with n =
 (door_min_rv = 0.4, radius 0.06 rv: s = 0.28, fractions 0, 0.25, 0.5, 0.75, 1; the ends
 0 and 1 are the edge's own end points.)
 
+Oblique walls (amendment 2026-11-25). A perpendicular probe line passes an opening of
+width w in a wall at angle theta to the edge only if w cos(theta) - 2r exceeds the line
+spacing: at 45 deg a 0.44 rv door was missed. A probe that touches tells which touch sector
+stopped it; the wall's normal lies within tau (= pi / N_T, 22.5 deg) of that sector's
+centre. So a touched interior probe whose sector centre is more than
+``TopologyParams.tilt_min`` (3 deg) off the direction driven is driven again from the same point on the edge, along that centre (a
+TILTED probe, Deployment.tilt): its line is within tau of the wall's normal, the lines of
+one side are at most L/n apart along the edge (less across the tilted lines), and every
+opening in that wall at least (L/n + 2r) / cos(tau) wide (:func:`tilted_door_rv`: 0.41 rv
+at the defaults, whatever the wall's angle) is passed by one of them. The side closes once
+every interior probe touched and, where needed, its tilted probe touched too.
+
 coordinator.topology.fence asks only for the interior fractions (0 < f < 1): the ends' own drives
 or contacts made the side a candidate, and interior probes at most s apart and less than s
 from the ends cross every opening >= door_min_rv within the edge's span. A recorded probe
@@ -37,13 +49,17 @@ from dataclasses import dataclass
 from typing import Container, Mapping
 
 __all__ = ["ProbeKey", "DriveRecord", "Evidence", "probe_fractions", "probe_depth_rv",
-           "probe_key"]
+           "probe_key", "needs_tilt", "tilted_door_rv", "TILT_MATCH"]
 
 # (u, v, sigma, frac): edge u < v (node ids), canonical open side sigma (coordinator.topology.fence's
 # convention: +1 is counter-clockwise from v as seen by u), fraction measured from u.
 ProbeKey = tuple[int, int, int, float]
 
 _FRAC_DIGITS = 3
+
+# A tilted probe that touched stands for any needed tilt within this (rad) of its own: the
+# same direction, up to the bearing noise in the edge's perpendicular.
+TILT_MATCH = math.radians(5.0)
 
 
 def probe_fractions(door_min_rv: float = 0.4, robot_radius_rv: float = 0.06) -> tuple[float, ...]:
@@ -61,18 +77,41 @@ def probe_fractions(door_min_rv: float = 0.4, robot_radius_rv: float = 0.06) -> 
     return tuple(round(k / n, _FRAC_DIGITS) for k in range(n + 1))
 
 
-def probe_depth_rv(frac: float, d0_rv: float, d_td_rv: float) -> float:
-    """How far (x rv) a probe at ``frac`` drives perpendicular to its edge.
+def probe_depth_rv(frac: float, d0_rv: float, d_td_rv: float, lean: float = 0.0) -> float:
+    """How far (x rv) a probe at ``frac`` drives from its edge into the open side.
 
     End probes (0 or 1) drive the test-drive length. Interior probes keep their end point
-    within d0 of both ends of an edge of length rv: sqrt(d0^2 - max(f, 1 - f)^2), at least
-    a quarter of d0 (for very fine fractions). A probe that does not touch has found room:
+    within d0 of both ends of an edge of length rv, at least a quarter of d0 (for very fine
+    fractions). ``lean``: the drive's unit vector's component along the edge, toward the
+    end the fraction is measured to (0 for a perpendicular probe: sqrt(d0^2 - max(f, 1 -
+    f)^2); sin of the tilt for a tilted one). A probe that does not touch has found room:
     its robot stays there as the new vertex."""
     f = float(frac)
     if f <= 1e-9 or f >= 1.0 - 1e-9:
         return float(d_td_rv)
-    m = max(f, 1.0 - f)
-    return max(math.sqrt(max(d0_rv * d0_rv - m * m, 0.0)), 0.25 * d0_rv)
+    sx = max(-1.0, min(1.0, float(lean)))
+    c2 = 1.0 - sx * sx
+    # |(f, 0) + t (sx, cy) - (e, 0)|^2 <= d0^2 for both ends e = 0, 1
+    reach = min(-a * sx + math.sqrt(max(d0_rv * d0_rv - a * a * c2, 0.0))
+                for a in (f, f - 1.0))
+    return max(reach, 0.25 * d0_rv)
+
+
+def needs_tilt(offset: float | None, tilt_min: float) -> bool:
+    """Whether a touched probe whose touch sector centre is ``offset`` (rad, from the
+    direction driven) is driven again along that centre: more than ``tilt_min`` (rad,
+    TopologyParams.tilt_min) off (see the module docstring)."""
+    return offset is not None and abs(float(offset)) > float(tilt_min)
+
+
+def tilted_door_rv(fractions, robot_radius_rv: float, tau: float, tilt_min: float) -> float:
+    """Narrowest opening (x rv), at any angle of a wall the side's robots felt, that a side
+    closed on evidence cannot have: (largest gap between fractions + 2r) / cos(tau +
+    tilt_min): the re-driven lines are within tau of the wall's normal, those not
+    re-driven within tau + tilt_min. Edges at most rv long."""
+    fr = sorted(float(f) for f in fractions)
+    gap = max(b - a for a, b in zip(fr, fr[1:]))
+    return (gap + 2.0 * float(robot_radius_rv)) / math.cos(float(tau) + float(tilt_min))
 
 
 def probe_key(vertex: int, edge: tuple[int, int], sigma: int, via_frac: float) -> ProbeKey:
@@ -86,8 +125,10 @@ def probe_key(vertex: int, edge: tuple[int, int], sigma: int, via_frac: float) -
 @dataclass(frozen=True)
 class DriveRecord:
     """One drive's outcome. vertex: the node it was driven from. direction: the direction
-    driven (rad, that robot's body frame; the perpendicular leg for a probe). kind:
-    Deployment.kind. via_frac: fraction of the approach leg (probes; 0 otherwise)."""
+    driven (rad, that robot's body frame; the perpendicular or tilted leg for a probe).
+    kind: Deployment.kind. via_frac: fraction of the approach leg (probes; 0 otherwise).
+    tilt: Deployment.tilt (rad; 0 for a perpendicular probe). contact_offset: a touch's
+    sector centre minus ``direction`` (rad; 0 when clear)."""
 
     vertex: int
     direction: float
@@ -96,6 +137,8 @@ class DriveRecord:
     sigma: int
     via_frac: float
     touched: bool
+    tilt: float = 0.0
+    contact_offset: float = 0.0
 
 
 class Evidence:
@@ -112,6 +155,10 @@ class Evidence:
         self.records: list[DriveRecord] = []
         self._failed: dict[int, list[float]] = {}
         self._probes: set[ProbeKey] = set()
+        # touched perpendicular probes: key -> touch sector centre - direction (rad)
+        self._offsets: dict[ProbeKey, float] = {}
+        # key -> tilts (rad) of its tilted probes that touched
+        self._tilted: dict[ProbeKey, list[float]] = {}
         self._clear: set[ProbeKey] = set()
         # interior probes a FREE probe (no path, nobody refills its vertex) drove clear and
         # came back from: no evidence, the side stays open; never offered free again
@@ -121,7 +168,7 @@ class Evidence:
 
     # ---------------------------------------------------------------- recording
     def record(self, dep, touched: bool, *, direction: float | None = None,
-               returned: bool = False) -> DriveRecord:
+               returned: bool = False, contact_offset: float = 0.0) -> DriveRecord:
         """Record the outcome of driving ``dep`` (a coordinator.topology.fence.Deployment, or anything
         with its fields). ``direction`` overrides dep.bearing (the direction actually driven,
         e.g. after lattice placement). ``touched``: the drive failed with a touch before it
@@ -129,17 +176,26 @@ class Evidence:
         ``returned``: a clear drive whose robot went back to its vertex (a free probe, see
         coordinator.planner.plan_cycle): nobody stayed in the room it found, so it is not a
         clear probe (those close a still one-sided side as the inference 'probe_clear'); its
-        key goes to :meth:`returned_probes` only and the side stays open."""
+        key goes to :meth:`returned_probes` only and the side stays open.
+        ``contact_offset``: for a touch, the touch sector's centre minus the direction driven
+        (rad; the agent's Status.touch_offset): a perpendicular interior probe whose offset
+        :func:`needs_tilt` is then offered again, tilted along that centre."""
         d = float(dep.bearing if direction is None else direction)
         frac = float(getattr(dep, "via_frac", 0.0) or 0.0)
         edge = tuple(int(x) for x in dep.edge) if dep.edge is not None else None
+        tilt = float(getattr(dep, "tilt", 0.0) or 0.0)
         rec = DriveRecord(int(dep.vertex), d, str(dep.kind), edge, int(dep.sigma), frac,
-                          bool(touched))
+                          bool(touched), tilt, float(contact_offset) if touched else 0.0)
         self.records.append(rec)
         interior = rec.kind == "probe" and edge is not None and frac > 1e-9
         if touched:
             if interior:
-                self._probes.add(probe_key(rec.vertex, edge, rec.sigma, frac))
+                key = probe_key(rec.vertex, edge, rec.sigma, frac)
+                if tilt:
+                    self._tilted.setdefault(key, []).append(tilt)
+                else:
+                    self._probes.add(key)
+                    self._offsets[key] = rec.contact_offset
             else:
                 self.add_failed_direction(rec.vertex, d)
         elif interior and returned:
@@ -184,6 +240,19 @@ class Evidence:
         return frozenset(k for k in self._probes
                          if present is None or (k[0] in present and k[1] in present))
 
+    def probe_offsets(self, present: Container[int] | None = None) -> dict[ProbeKey, float]:
+        """Touched perpendicular interior probes: key -> touch sector centre - direction
+        (rad): detect_fence's ``probe_offsets``."""
+        return {k: o for k, o in self._offsets.items()
+                if present is None or (k[0] in present and k[1] in present)}
+
+    def tilt_failures(self, present: Container[int] | None = None
+                      ) -> dict[ProbeKey, tuple[float, ...]]:
+        """key -> tilts (rad) of its tilted probes that touched: detect_fence's
+        ``tilt_failures``."""
+        return {k: tuple(t) for k, t in self._tilted.items()
+                if present is None or (k[0] in present and k[1] in present)}
+
     def clear_probes(self, present: Container[int] | None = None) -> frozenset[ProbeKey]:
         """Keys of interior probes that found room: detect_fence's ``probe_clear``."""
         return frozenset(k for k in self._clear
@@ -206,10 +275,12 @@ class Evidence:
 
     def fence_kwargs(self, present: Container[int] | None = None) -> dict:
         """Keyword arguments for detect_fence: test_drive_failures, probe_failures,
-        probe_clear, probe_unreachable and probe_fracs (restricted to nodes in ``present``
-        when given)."""
+        probe_offsets, tilt_failures, probe_clear, probe_unreachable and probe_fracs
+        (restricted to nodes in ``present`` when given)."""
         return dict(test_drive_failures=self.failed_directions(present),
                     probe_failures=self.failed_probes(present),
+                    probe_offsets=self.probe_offsets(present),
+                    tilt_failures=self.tilt_failures(present),
                     probe_clear=self.clear_probes(present),
                     probe_unreachable=self.unreachable_probes(present),
                     probe_fracs=self.fractions)

@@ -30,7 +30,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from ground.angles import circular_mean, wrap, wrap_array
 from .complex import Complex
-from .evidence import probe_depth_rv, probe_fractions
+from .evidence import TILT_MATCH, needs_tilt, probe_depth_rv, probe_fractions
 from .params import TopologyParams
 
 __all__ = ["Deployment", "FenceSide", "FenceEdge", "Fence", "detect_fence"]
@@ -93,6 +93,9 @@ class Deployment:
       the edge into the open side ``sigma``.
     depth_rv: how far (x rv) the drive along ``bearing`` goes; 0 for non-probes (the
       configured test-drive length or the planner's placement).
+    tilt: probes only: 0 for a probe perpendicular to the edge; for a TILTED probe (its
+      perpendicular probe touched, coordinator.topology.evidence) the CCW angle (rad) from
+      the perpendicular to ``bearing``: the touch sector's centre, near the wall's normal.
     A geometric harness executes a probe as: x = p + via_frac * (q - p), then drive from x
     along the perpendicular for depth_rv * rv; a touch within the deployer's
     wall_keep_rv sends the robot home (evidence of a wall), no touch leaves it there.
@@ -107,6 +110,7 @@ class Deployment:
     kind: str
     via_frac: float = 0.0
     depth_rv: float = 0.0
+    tilt: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -395,6 +399,17 @@ def _repair_cycle(cx: Complex, z: np.ndarray, band: np.ndarray) -> np.ndarray:
     return np.nonzero(toggled)[0]
 
 
+def _tilts_todo(needed, done) -> list[float]:
+    """The tilts (rad) of ``needed``, merged within evidence.TILT_MATCH, that no touched
+    tilt in ``done`` stands for."""
+    todo: list[float] = []
+    for t in needed:
+        if any(abs(wrap(t - d)) <= TILT_MATCH for d in (*done, *todo)):
+            continue
+        todo.append(float(t))
+    return todo
+
+
 def detect_fence(
     cx: Complex,
     params: TopologyParams | None = None,
@@ -406,6 +421,8 @@ def detect_fence(
     probe_fracs=None,
     probe_unreachable=(),
     probe_clear=(),
+    probe_offsets=None,
+    tilt_failures=(),
 ) -> Fence:
     """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
 
@@ -443,12 +460,17 @@ def detect_fence(
       there first and the side closes once it has no room) and ``forced_obstacle``
       ('forced'); ``Fence.inferred`` lists them.
     Guarantee: with edges <= rv, for a side closed on evidence, every opening at least
-    door_min_rv wide whose span lies within the edge's was crossed by a probe line with the
-    robot's body clear of both jambs, and that probe touched within the deployer's
-    wall_keep_rv (0.45 rv) of the edge: no such opening exists that close. Limits:
-    narrower openings; openings straddling an edge's end with less than door_min_rv on
-    each of the two edges; a dangling edge's interior probes approach open loop (its length
-    assumed d0).
+    door_min_rv wide *along the edge* whose span lies within the edge's was crossed by a
+    perpendicular probe line with the robot's body clear of both jambs, and that probe
+    touched within the deployer's wall_keep_rv (0.45 rv) of the edge: no such opening
+    exists that close. In a wall the side's robots felt (a probe's touch, an end's
+    contact), at whatever angle to the edge, every opening at least
+    ``evidence.tilted_door_rv`` wide (0.41 rv at the defaults) whose span along the probe
+    lines lies within the edge's was crossed the same way by a probe line within
+    tau + TopologyParams.tilt_min of the wall's normal. Limits: narrower openings; openings
+    straddling an edge's end with less than that on each of the two edges; doors in a wall
+    no robot of the side felt; a dangling edge's interior probes approach open loop (its
+    length assumed d0).
 
     test_drive_failures: node id -> direction, or list of directions (rad, that robot's
       body frame), of drives that touched an obstacle (spec 3.4(iv)), end probes included;
@@ -458,6 +480,15 @@ def detect_fence(
     probe_unreachable: (u, v, sigma, fraction, end): interior probes given up from that
       end (their approach kept failing).
     probe_clear: keys of interior probes that found room (done, not offered again).
+    probe_offsets: key -> touch sector centre minus the direction driven (rad) of touched
+      perpendicular probes. Missing: the sector is unknown (no tilt from it).
+    tilt_failures: key -> tilts (rad, from the perpendicular) of its TILTED probes that
+      touched. A touched perpendicular probe is done only once a tilted probe from the same
+      point touched (or one found room: ``probe_clear``) along each wall normal known at the
+      side (those ``evidence.needs_tilt`` keeps): its own touch sector's centre, and the
+      wall contact of either end that points into the open side. So every wall the side's
+      robots have felt is probed along (within tau of) its normal, where an oblique door
+      is widest (coordinator.topology.evidence).
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
       e.g. edges reclassified after a failed test drive in an earlier cycle.
     default_bearing: first deployment direction (rad, body frame) of a robot with no
@@ -624,6 +655,8 @@ def detect_fence(
         return (int(k[0]), int(k[1]), int(k[2]), round(float(k[3]), 3))
 
     pfail = {_key(k) for k in probe_failures}
+    poff = {_key(k): float(o) for k, o in (probe_offsets or {}).items()}
+    tfail = {_key(k): tuple(float(x) for x in t) for k, t in (tilt_failures or {}).items()}
     pclear = {_key(k) for k in probe_clear}
     # unreached: (key, end) given up from that end
     punreach = {(_key(k), int(k[4])) for k in probe_unreachable}
@@ -653,6 +686,16 @@ def detect_fence(
         pv = wrap(L.bearings(v)[u] - sg * math.pi / 2.0)
         inner: list[Deployment] = []
         n_clear = n_open = 0
+        # wall normals the ends rest against, pointing into the open side: each interior
+        # probe that touched is driven along them too (a door in a wall the side cuts
+        # obliquely, e.g. at a corner, is widest along its normal)
+        end_tilts = []
+        for p, perp in ((u, pu), (v, pv)):
+            c = contact(p)
+            if c is not None:
+                t = wrap(c - perp)
+                if needs_tilt(t, P.tilt_min) and abs(t) < math.pi / 2.0 - tau:
+                    end_tilts.append(t)
         for g in fracs:
             if g <= 1e-9 or g >= 1.0 - 1e-9:
                 # the ends: their own failed drives / contacts made the side a candidate. The
@@ -662,21 +705,33 @@ def detect_fence(
                 # of the small map, seed 0)
                 continue
             key = (iu, iv, sg, round(g, 3))
+            tilt = 0.0
             if key in pfail:
-                continue                      # touched: evidence of a wall there
+                # touched: driven again from the same point along each known wall normal
+                # oblique to the probe line (its own touch sector's centre, the ends'
+                # contacts) until each of those touched too
+                off = poff.get(key)
+                todo = _tilts_todo(([off] if needs_tilt(off, P.tilt_min) else []) + end_tilts,
+                                   tfail.get(key, ()))
+                if not todo:
+                    continue                  # touched along every one: evidence of a wall
+                tilt = todo[0]
             if key in pclear:
                 n_clear += 1                  # found room (its robot stays): done, not evidence
                 continue
             n_open += 1
-            depth = probe_depth_rv(g, d0_rv, dtd_rv)
+            # the tilted drive's component along the edge, toward v (sigma +1: open side CCW
+            # of u -> v, so a CCW tilt leans back toward u)
+            depth = probe_depth_rv(g, d0_rv, dtd_rv, lean=-sg * math.sin(tilt))
+            bu, bv = wrap(pu + tilt), wrap(pv + tilt)
             # either end can drive it, the nearer one first; an end whose approach leg kept
             # failing (it clips a jamb) has given up: the other end tries it
             a = None if _gave_up(key, iu) else Deployment(
-                iu, pu, (iu, iv), sg, sg * math.pi / 2.0, L.clearance(u, pu), "probe",
-                round(g, 3), depth)
+                iu, bu, (iu, iv), sg, wrap(sg * math.pi / 2.0 + tilt), L.clearance(u, bu), "probe",
+                round(g, 3), depth, tilt)
             b = None if _gave_up(key, iv) else Deployment(
-                iv, pv, (iu, iv), sg, -sg * math.pi / 2.0, L.clearance(v, pv), "probe",
-                round(1.0 - g, 3), depth)
+                iv, bv, (iu, iv), sg, wrap(-sg * math.pi / 2.0 + tilt), L.clearance(v, bv),
+                "probe", round(1.0 - g, 3), depth, tilt)
             inner.extend(d for d in ((a, b) if g <= 0.5 else (b, a)) if d is not None)
         if inner:
             probing[(e, sg)] = sorted(inner, key=lambda d: d.via_frac)

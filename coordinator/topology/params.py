@@ -35,6 +35,11 @@ class TopologyParams:
       certificate on doors >= door_min_rv needs it over 500 maps, while corridor_doors
       (seed 0, in-process) took 94 robots / 150 cycles / 2,789 s with it against 75 / 85 /
       1,785 s without.
+    tilt_min: a probe that touched with its touch sector's centre more than this (rad) off
+      the direction driven is driven again along that centre, near the wall's normal
+      (coordinator.topology.evidence); below it the perpendicular line is already within
+      tau + tilt_min of the normal. 0 re-drives every oblique touch; pi never does (the
+      rules before 2026-11-25).
     """
 
     rv: float = 1.0
@@ -48,6 +53,7 @@ class TopologyParams:
     corner_probes: bool = False
     clear_infers: bool = True
     corner_wait: bool = False
+    tilt_min: float = math.radians(3.0)
 
     def __post_init__(self) -> None:
         if self.eps is None:
