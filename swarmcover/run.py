@@ -876,10 +876,15 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                     if why:
                         state.refuse("spawn", why)
                         continue
-                    if sp.robot in available and not sp.live:
-                        # placed from the agents that joined by hand: it has a process
-                        log.info("robot %d: the coordinator placed an agent that joined by "
-                                 "hand (no process started)", sp.robot)
+                    if sp.robot in available:
+                        # placed from the agents that joined by hand: it has a process. A
+                        # live robot's agent may well run on the robot itself; a second one
+                        # started here would be refused as a clash (exit 2) anyway
+                        (log.warning if sp.live else log.info)(
+                            "robot %d: the coordinator placed an agent that joined by hand "
+                            "(no process started)%s", sp.robot,
+                            "; the config makes it LIVE: that agent must run with --live "
+                            "and the robot's limits" if sp.live else "")
                         state.joined += 1
                         continue
                     launcher.start(name, _agent_args(sp, conf_path, live_limits))
