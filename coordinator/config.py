@@ -5,6 +5,7 @@ Lengths in metres (relative values are multiplied by rv), times in simulated sec
 from __future__ import annotations
 
 import math
+import dataclasses
 from dataclasses import dataclass
 
 from bus.configcheck import ConfigError, check_fields
@@ -70,7 +71,10 @@ class CoordinatorConfig:
                                    # length touched; spacing door_min_rv - 2 x robot radius
                                    # (x rv), so any opening at least this wide in front of it
                                    # is driven through (coordinator.topology.evidence). 0.4 with a
-                                   # 0.06 m radius at rv = 1 m: probes at 1/4, 1/2, 3/4
+                                   # 0.06 m radius at rv = 1 m: probes at 1/4, 1/2, 3/4. A probe
+                                   # whose touch sector lies off its line, or whose side's ends
+                                   # rest on an oblique wall, is driven again along that wall's
+                                   # normal: 0.41 rv doors at any wall angle
     free_probes: bool = True       # frontier robots off every push probe their sides in the
                                    # same cycle without a path, and come back home whatever
                                    # they found (a clear one is no evidence; a push takes that
@@ -81,21 +85,9 @@ class CoordinatorConfig:
     final_recheck: bool = True     # after K is empty: redistribute redundant robots, re-certify
 
     def __post_init__(self):
-        if self.push_mode not in ("parallel", "sequential"):
-            raise ValueError(f"[coordinator] push_mode = {self.push_mode!r}: "
-                             "use 'parallel' or 'sequential'")
-        for name in ("rv", "task_timeout_s", "spawn_timeout_s"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"[coordinator] {name} = {getattr(self, name)!r}: must be > 0")
-        if not 0 <= self.eps_rv < 1:
-            raise ValueError(f"[coordinator] eps_rv = {self.eps_rv!r}: must be in [0, 1)")
-        if self.max_paths < 1 or self.robots_max < 1:
-            raise ValueError("[coordinator] max_paths and robots_max must be >= 1")
-        if not 0 < self.door_min_rv <= 2.0:
-            raise ValueError(f"[coordinator] door_min_rv = {self.door_min_rv!r}: must be in "
-                             "(0, 2] (x rv)")
-        if self.td_retries < 0:
-            raise ValueError(f"[coordinator] td_retries = {self.td_retries!r}: must be >= 0")
+        # one table of ranges and choices for the file and for code that builds one directly
+        check_fields(type(self), {f.name: getattr(self, f.name) for f in dataclasses.fields(self)},
+                     "CoordinatorConfig", "coordinator", bounds=_BOUNDS, choices=_CHOICES)
 
     @property
     def d0(self) -> float:
@@ -112,16 +104,17 @@ class CoordinatorConfig:
         """Build from a raw ``[coordinator]`` dict. Unknown keys, wrong types, non-finite
         numbers and values out of range are ConfigErrors naming file, section, field, value."""
         vals = check_fields(cls, section, where, "coordinator", bounds=_BOUNDS,
-                            choices={"push_mode": ("parallel", "sequential")}, skip=("rv",))
+                            choices=_CHOICES, skip=("rv",))
         try:
             return cls(rv=rv, **vals)
-        except ValueError as e:
-            raise ConfigError(where, "coordinator", "", None, str(e)) from None
+        except ConfigError as e:   # rv (from the run config) out of range
+            raise ConfigError(where, e.section, e.field, e.value, e.reason) from None
 
 
 # (lo, hi[, lo_open, hi_open]) per field; fields not listed only need a finite value of
 # their type. Lengths in rv, times in simulated seconds.
 _BOUNDS = {
+    "rv": (0.0, 1e6, True),
     "eps_rv": (0.0, 1.0, False, True),
     "beta_deg": (0.0, 30.0),
     "n_touch": (1, 360),
@@ -139,4 +132,6 @@ _BOUNDS = {
     "dead_after_cycles": (1, 10**9),
     "dead_grace_s": (0.0, 1e6),
     "max_cycles": (1, 10**12),
+    "door_min_rv": (0.0, 2.0, True),
 }
+_CHOICES = {"push_mode": ("parallel", "sequential")}
