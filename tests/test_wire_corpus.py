@@ -53,3 +53,96 @@ def test_numpy_values_encode_as_the_plain_values_they_hold():
                   touch=np.array([0.5]), touch_robot=np.array([True]))
     assert arr.encode() == plain.encode()
     assert m.decode(arr.encode()) == plain
+
+
+# --------------------------------------------------------------------------- fast path
+
+def _outcome(fn, p, expected):
+    try:
+        msg = fn(p, expected)
+    except m.WireError as e:
+        return ("error", str(e))
+    return ("ok", type(msg).__name__, msg.encode())
+
+
+def _edge_values(meta: dict) -> list:
+    """Values at and just past a field's bounds and caps, where two checkers could differ."""
+    kind = meta["kind"]
+    if kind in ("float", "floats", "polys"):
+        lo, hi = meta["lo"], meta["hi"]
+        vals = [lo, hi, np.nextafter(lo, -np.inf).item(), np.nextafter(hi, np.inf).item(),
+                -0.0, float("nan"), float("inf"), -float("inf"), True, "1.0", None]
+        vals += [int(x) for x in (lo, hi) if abs(x) < 2**63] + [2**63 - 1, -2**63, 2**64 - 1]
+        if kind == "floats":
+            vals = [[v] for v in vals] + vals[:2]
+        if kind == "polys":
+            vals = [[[v, v]] for v in vals] + [[[0.0]], [0.0, 0.0], [[]], []]
+        return vals
+    if kind in ("int", "ints"):
+        lo, hi = meta["lo"], meta["hi"]
+        vals = [lo, hi, lo - 1, hi + 1, float(lo), True, False, 2**63 - 1, -2**63, 2**64 - 1,
+                "0", None]
+        return [[v] for v in vals] + [lo] if kind == "ints" else vals
+    if kind in ("bool", "bools"):
+        vals = [True, False, 0, 1, None, "true"]
+        return [[v] for v in vals] + [True] if kind == "bools" else vals
+    if kind in ("str", "strs"):
+        cap = meta["maxlen"]
+        vals = [b"bytes", 3, None, ["a"]]
+        if meta.get("choices"):
+            c = meta["choices"][0]
+            vals += list(meta["choices"]) + [c.upper(), c + " ", ""]
+        elif cap <= 2000:
+            vals += ["é" * cap, "é" * (cap + 1), "✓" * cap, "x" * (cap + 1), ""]
+        return [[v] for v in vals] + ["a"] if kind == "strs" else vals
+    raise AssertionError(kind)
+
+
+def test_the_fast_path_decides_as_the_field_checkers_do_at_the_edges():
+    """msgspec (decode) and the Python checkers (_decode_checked) agree on every field's
+    values at and just past its bounds, on lists over the cap, on missing, extra and
+    reordered keys: same message, or same WireError."""
+    n = 0
+    for cls in m.ALL_MESSAGES:
+        base = cls().to_dict()
+        cases = [dict(base), {k: v for k, v in base.items() if k not in cls._OPTIONAL},
+                 dict(reversed(list(base.items()))), {**base, "_v": 1.0}, {**base, "_v": True},
+                 {**base, "_v": None}, {**base, "zz": 1}, {**base, "_t": 7}]
+        for name, meta in cls._META.items():
+            cases.append({k: v for k, v in base.items() if k != name})
+            cases += [{**base, name: v} for v in _edge_values(meta)]
+            if meta["kind"] in ("floats", "ints", "bools", "strs", "polys"):
+                cases.append({**base, name: [base[name][:1] if meta["kind"] == "polys" else
+                                            _edge_values(meta)[-1]] * (m._MAX_LIST + 1)})
+        for d in cases:
+            try:
+                p = m.msgpack.packb(d, use_bin_type=True)
+            except (OverflowError, TypeError):
+                continue
+            for expected in (cls, None, m.Sense):
+                assert _outcome(m.decode, p, expected) == _outcome(m._decode_checked, p,
+                                                                   expected), (cls.TAG, d)
+                n += 1
+    assert n > 3000
+
+
+def test_the_fast_path_decides_as_the_field_checkers_do_on_fuzz():
+    import random
+
+    from bench.faults import invalid_payloads
+    rng = random.Random(5)
+    for cls in m.ALL_MESSAGES:
+        for p in invalid_payloads(cls, 300, rng, decode_check=False):
+            assert _outcome(m.decode, p, cls) == _outcome(m._decode_checked, p, cls), cls.TAG
+
+
+def test_msgspec_itself_accepts_the_valid_payloads(corpus):
+    """Valid payloads take the fast path (not the Python fallback), but for ``_v`` sent as
+    1.0, which the checkers accept (1.0 == 1) and msgspec does not."""
+    for e in corpus:
+        if e["ok"]:
+            cls = m.REGISTRY[e["tag"]]
+            v = m.msgpack.unpackb(e["payload"])["_v"]
+            if type(v) is int:
+                m._decoder(cls).decode(e["payload"])
+                m._decoder(None).decode(e["payload"])
