@@ -7,7 +7,7 @@ raises :class:`WireError` naming the message type and the field.
 
 Each field is declared once, with an ``f_*`` helper below. From those declarations the
 codec derives, per message, a msgspec Struct that checks the tag, version, types, bounds
-and lengths in C (issue 20: decoding is 4-7x faster than checking each field in Python,
+and lengths in C (issue 20: decoding is 4-8x faster than checking each field in Python,
 bench/msgspec_decode.py). What msgspec cannot express (same-length lists, a message's
 ``_post_check``, polygons of coordinate pairs) is checked in Python after it. A payload
 msgspec rejects goes through the field checkers in Python (``_decode_checked``), the
