@@ -72,9 +72,9 @@ class CoordinatorConfig:
                                    # (x rv), so any opening at least this wide in front of it
                                    # is driven through (coordinator.topology.evidence). 0.4 with a
                                    # 0.06 m radius at rv = 1 m: probes at 1/4, 1/2, 3/4. A probe
-                                   # whose touch sector lies off its line, or whose side's ends
-                                   # rest on an oblique wall, is driven again along that wall's
-                                   # normal: 0.41 rv doors at any wall angle
+                                   # whose touch sector is not its line's own, or whose side's
+                                   # end rests on a wall that oblique, is driven again along
+                                   # that wall's normal: 0.52 rv doors at any wall angle
     free_probes: bool = True       # frontier robots off every push probe their sides in the
                                    # same cycle without a path, and come back home whatever
                                    # they found (a clear one is no evidence; a push takes that

@@ -84,7 +84,10 @@ def test_the_tilted_guarantee_follows_from_the_gaps_and_tau():
     tilt_min = TopologyParams().tilt_min
     assert tilted_door_rv(probe_fractions(0.4, 0.06), 0.06, math.pi / 8, tilt_min) == \
         pytest.approx(0.37 / math.cos(math.pi / 8 + tilt_min))
-    assert 0.40 < tilted_door_rv(probe_fractions(0.4, 0.06), 0.06, math.pi / 8, tilt_min) < 0.42
+    # the default: not re-driven within the line's own sector (tau), 0.52 rv at any angle
+    assert tilt_min == pytest.approx(math.pi / 8)
+    assert 0.52 < tilted_door_rv(probe_fractions(0.4, 0.06), 0.06, math.pi / 8, tilt_min) < 0.53
+    assert 0.40 < tilted_door_rv(probe_fractions(0.4, 0.06), 0.06, math.pi / 8, 3 * DEG) < 0.42
 
 
 def _tilted(f):

@@ -26,12 +26,16 @@ width w in a wall at angle theta to the edge only if w cos(theta) - 2r exceeds t
 spacing: at 45 deg a 0.44 rv door was missed. A probe that touches tells which touch sector
 stopped it; the wall's normal lies within tau (= pi / N_T, 22.5 deg) of that sector's
 centre. So a touched interior probe whose sector centre is more than
-``TopologyParams.tilt_min`` (3 deg) off the direction driven is driven again from the same point on the edge, along that centre (a
-TILTED probe, Deployment.tilt): its line is within tau of the wall's normal, the lines of
-one side are at most L/n apart along the edge (less across the tilted lines), and every
-opening in that wall at least (L/n + 2r) / cos(tau) wide (:func:`tilted_door_rv`: 0.41 rv
-at the defaults, whatever the wall's angle) is passed by one of them. The side closes once
-every interior probe touched and, where needed, its tilted probe touched too.
+``TopologyParams.tilt_min`` (default tau: not in the line's own sector) off the direction
+driven is driven again from the same point on the edge, along that centre (a TILTED probe,
+Deployment.tilt), and so is every touched probe of a side whose end rests on a wall that
+far off (a corner). A re-driven line is within tau of the wall's normal; a line not
+re-driven is within tau + tilt_min. The lines of one side are at most L/n apart along the
+edge (less across tilted lines), so every opening in a wall the side felt at least
+(L/n + 2r) / cos(tau + tilt_min) wide (:func:`tilted_door_rv`: 0.52 rv at the defaults,
+whatever the wall's angle; 0.41 with tilt_min 3 deg, at a measured cost in TopologyParams)
+is passed by one of them. The side closes once every interior probe touched and, where
+needed, its tilted probes touched too.
 
 coordinator.topology.fence asks only for the interior fractions (0 < f < 1): the ends' own drives
 or contacts made the side a candidate, and interior probes at most s apart and less than s

@@ -465,7 +465,7 @@ def detect_fence(
     touched within the deployer's wall_keep_rv (0.45 rv) of the edge: no such opening
     exists that close. In a wall the side's robots felt (a probe's touch, an end's
     contact), at whatever angle to the edge, every opening at least
-    ``evidence.tilted_door_rv`` wide (0.41 rv at the defaults) whose span along the probe
+    ``evidence.tilted_door_rv`` wide (0.52 rv at the defaults) whose span along the probe
     lines lies within the edge's was crossed the same way by a probe line within
     tau + TopologyParams.tilt_min of the wall's normal. Limits: narrower openings; openings
     straddling an edge's end with less than that on each of the two edges; doors in a wall
