@@ -7,6 +7,7 @@ tests/test_coordinator_evidence.py.
 """
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -119,8 +120,7 @@ def test_a_probe_that_touched_an_oblique_wall_is_driven_again_along_its_normal()
         assert wrap(d.bearing - perp[d.vertex]) == pytest.approx(45 * DEG)
     assert e in f.frontier.tolist()
     # the tilted drive found room: the side never closes on evidence
-    ev2 = Evidence()
-    ev2.records, ev2._probes, ev2._offsets = list(ev.records), set(ev._probes), dict(ev._offsets)
+    ev2 = copy.deepcopy(ev)
     ev2.record(todo[0], touched=False)
     assert _open_or_inferred_clear(detect_fence(cx, **ev2.fence_kwargs()), e)
     # it touched too: closed on evidence

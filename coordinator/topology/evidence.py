@@ -158,8 +158,7 @@ class Evidence:
         self.fractions = probe_fractions(door_min_rv, robot_radius_rv)
         self.records: list[DriveRecord] = []
         self._failed: dict[int, list[float]] = {}
-        self._probes: set[ProbeKey] = set()
-        # touched perpendicular probes: key -> touch sector centre - direction (rad)
+        # touched perpendicular interior probes: key -> touch sector centre - direction (rad)
         self._offsets: dict[ProbeKey, float] = {}
         # key -> tilts (rad) of its tilted probes that touched
         self._tilted: dict[ProbeKey, list[float]] = {}
@@ -198,7 +197,6 @@ class Evidence:
                 if tilt:
                     self._tilted.setdefault(key, []).append(tilt)
                 else:
-                    self._probes.add(key)
                     self._offsets[key] = rec.contact_offset
             else:
                 self.add_failed_direction(rec.vertex, d)
@@ -241,7 +239,7 @@ class Evidence:
 
     def failed_probes(self, present: Container[int] | None = None) -> frozenset[ProbeKey]:
         """Keys of interior probes that touched: detect_fence's ``probe_failures``."""
-        return frozenset(k for k in self._probes
+        return frozenset(k for k in self._offsets
                          if present is None or (k[0] in present and k[1] in present))
 
     def probe_offsets(self, present: Container[int] | None = None) -> dict[ProbeKey, float]:
