@@ -10,8 +10,6 @@ All bearings are in the body frame (rad, CCW, 0 = forward); distances in m, time
 """
 from __future__ import annotations
 
-import math
-
 from bus.messages import Sense
 
 from .control import FrameTracker, circmean, unit, wrap
