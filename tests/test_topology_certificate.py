@@ -755,19 +755,63 @@ def test_a_fold_of_overlapping_triangles_is_closed_by_dropping_its_shared_edge()
     assert not verify_certificate(cx, replace(cert, closure=np.array(sorted(z - rset))), fence)
 
 
-def test_a_closure_never_drops_an_edge_with_one_triangle():
+def test_a_closure_adds_edges_before_it_drops_an_edge_with_one_triangle():
     """Two sides of a square's triangle as the target (odd at their far ends): dropping
     both would leave nothing, a certificate from nothing (the forged-Complex re-check of
-    tests/test_run_report.py hit it). Only fold edges (two or more triangles) may leave the
-    target: the closure adds the diagonal instead."""
+    tests/test_run_report.py hit it). certify searches the narrower zone first, where only
+    fold edges (two or more triangles) may leave the target: the closure adds the diagonal."""
     from coordinator.topology.complex import Complex as TopoComplex
     ids = np.arange(4)
     edges = np.array([[0, 1], [0, 2], [1, 2], [1, 3], [2, 3]])
     tris = np.array([[0, 1, 2], [1, 2, 3]])
     cx = TopoComplex(ids, edges, tris, np.zeros((5, 2)), np.zeros(4, bool), np.full(4, np.nan))
     cert = certify(cx, SimpleNamespace(z_raw=np.array([0, 1])))
-    assert cert.certified
+    assert cert.certified and "closure_zone" not in cert.stats
     z = set(np.asarray(cert.z).tolist())
     assert {0, 1} <= z and z == {0, 1, 2}                  # 0-1, 0-2 and the diagonal
-    _, zone = closure_zone(cx, np.isin(np.arange(5), [0, 1]))
-    assert not {0, 1} & set(zone.tolist())                 # one triangle each: not droppable
+    target = np.isin(np.arange(5), [0, 1])
+    assert not {0, 1} & set(closure_zone(cx, target, folds_only=True)[1].tolist())
+    assert {0, 1} <= set(closure_zone(cx, target)[1].tolist())
+
+
+def test_a_one_sided_edge_crossed_by_others_may_leave_the_target():
+    """bench/truth.py seed 1 map 49 (boxes, 57 robots, 0.5 deg noise): a covered end state
+    that the fold-only closure refused. Its odd vertices 18 and 43 are far apart; 31-43 is
+    one-sided with one triangle, yet three edges cross it (it lies inside the union).
+    The whole zone may drop it, and certify then certifies; no closure in the narrower
+    zone exists (the obstruction proves it)."""
+    from coordinator.topology import certificate as C
+    d = json.loads((Path(__file__).parent / "data" / "truth_s1_map49_crossing.json").read_text())
+    reps = {int(v): {"neighbours": {int(k): b for k, b in r["neighbours"].items()},
+                     "touch": r["touch"], "touch_bearing": r["touch_bearing"]}
+            for v, r in d["reports"].items()}
+    cx = build_complex(reps)
+
+    def eids(pairs):
+        loc = cx.index(np.array(pairs).ravel()).reshape(-1, 2)
+        return cx.edge_index(loc[:, 0], loc[:, 1])
+
+    raw = eids(d["z_raw"])
+    fence = SimpleNamespace(z_raw=raw, z_repair=eids(d["z_repair"]))
+    zr = np.isin(np.arange(cx.n_edges), raw)
+    odd, narrow = closure_zone(cx, zr, folds_only=True)
+    f, psi = C._Solver(cx, None, {}).closure(zr, odd, narrow)
+    assert f is None and is_cocycle(cx, np.nonzero(psi)[0])
+    assert not psi[narrow].any() and (psi & zr).sum() % 2 == 1
+    cert = certify(cx, fence)
+    assert cert.certified and cert.stats["closure_zone"] == "whole"
+    assert verify_certificate(cx, cert, fence) and verify_certificate(cx, cert)
+    dropped = set(raw.tolist()) - set(cert.z.tolist())
+    one = [e for e in dropped if np.diff(cx.edge_triangles[0])[e] == 1]
+    assert one
+    # each dropped one-triangle edge is crossed by another edge (true positions)
+    pos = {int(k): np.array(v) for k, v in d["positions"].items()}
+
+    def cross(p1, p2, q1, q2):
+        o = lambda a, b, c: np.sign((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+        return o(q1, q2, p1) * o(q1, q2, p2) < 0 and o(p1, p2, q1) * o(p1, p2, q2) < 0
+
+    for e in one:
+        a, b = (int(x) for x in cx.ids[cx.edges[e]])
+        assert any(cross(pos[a], pos[b], pos[int(c)], pos[int(w)])
+                   for c, w in cx.ids[cx.edges] if not {int(c), int(w)} & {a, b})
