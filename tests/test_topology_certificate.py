@@ -716,14 +716,10 @@ if __name__ == "__main__":
             print(json.dumps(r))
 
 
-def test_a_fold_of_overlapping_triangles_is_closed_by_dropping_its_shared_edge():
-    # bench/truth.py seed 0 map 242 (two rooms, 41 robots): a covered fixed point that
-    # certify refused. Triangles 7-9-22 and 9-22-28 lie on the same side of 9-22 (a fold,
-    # where edges cross): 9-22, 7-22 and 9-28 are all one-sided, and over GF(2) no chain's
-    # boundary holds all three (they are a cocycle inside z_raw, met an odd number of
-    # times, whatever edges a closure adds). The closure may drop target edges at odd
-    # vertices (certificate.py's docstring).
-    d = json.loads((Path(__file__).parent / "data" / "truth_map242_fold.json").read_text())
+def _end_state(name: str):
+    """A bench/truth.py end state saved in tests/data: (its JSON, the complex built from its
+    reports, a function from node-id pairs to edge ids)."""
+    d = json.loads((Path(__file__).parent / "data" / name).read_text())
     reps = {int(v): {"neighbours": {int(k): b for k, b in r["neighbours"].items()},
                      "touch": r["touch"], "touch_bearing": r["touch_bearing"]}
             for v, r in d["reports"].items()}
@@ -733,6 +729,17 @@ def test_a_fold_of_overlapping_triangles_is_closed_by_dropping_its_shared_edge()
         loc = cx.index(np.array(pairs).ravel()).reshape(-1, 2)
         return cx.edge_index(loc[:, 0], loc[:, 1])
 
+    return d, cx, eids
+
+
+def test_a_fold_of_overlapping_triangles_is_closed_by_dropping_its_shared_edge():
+    # bench/truth.py seed 0 map 242 (two rooms, 41 robots): a covered fixed point that
+    # certify refused. Triangles 7-9-22 and 9-22-28 lie on the same side of 9-22 (a fold,
+    # where edges cross): 9-22, 7-22 and 9-28 are all one-sided, and over GF(2) no chain's
+    # boundary holds all three (they are a cocycle inside z_raw, met an odd number of
+    # times, whatever edges a closure adds). The closure may drop target edges at odd
+    # vertices (certificate.py's docstring).
+    d, cx, eids = _end_state("truth_map242_fold.json")
     raw, fold = eids(d["z_raw"]), eids(d["fold"])
     fence = SimpleNamespace(z_raw=raw, z_repair=eids(d["z_repair"]))
     assert set(fold.tolist()) <= set(raw.tolist()) and is_cocycle(cx, fold) and len(fold) % 2 == 1
@@ -781,16 +788,7 @@ def test_a_one_sided_edge_crossed_by_others_may_leave_the_target():
     The whole zone may drop it, and certify then certifies; no closure in the narrower
     zone exists (the obstruction proves it)."""
     from coordinator.topology import certificate as C
-    d = json.loads((Path(__file__).parent / "data" / "truth_s1_map49_crossing.json").read_text())
-    reps = {int(v): {"neighbours": {int(k): b for k, b in r["neighbours"].items()},
-                     "touch": r["touch"], "touch_bearing": r["touch_bearing"]}
-            for v, r in d["reports"].items()}
-    cx = build_complex(reps)
-
-    def eids(pairs):
-        loc = cx.index(np.array(pairs).ravel()).reshape(-1, 2)
-        return cx.edge_index(loc[:, 0], loc[:, 1])
-
+    d, cx, eids = _end_state("truth_s1_map49_crossing.json")
     raw = eids(d["z_raw"])
     fence = SimpleNamespace(z_raw=raw, z_repair=eids(d["z_repair"]))
     zr = np.isin(np.arange(cx.n_edges), raw)
