@@ -114,7 +114,7 @@ class Placement:
                         source_dirs=sources, known=known)
 
 
-def strays(snap: Snapshot, n_sources: int) -> set[int]:
+def stray_vertices(snap: Snapshot, n_sources: int) -> set[int]:
     """Vertices in components of the (mutual-visibility) graph that hold no source: robots
     that lost the swarm (a failed move, a failure that cut the graph). No path can reach
     them, so their frontier could never close; they are sent away instead."""
