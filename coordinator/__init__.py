@@ -2,7 +2,9 @@
 
 * ``coordinator.topology``: the topology core (pure functions, no I/O);
 * the deployment cycle: ``deployer`` (a pure state machine: statuses in, typed
-  ``actions`` out), ``planner`` (one cycle's plan from a snapshot), ``config``;
+  ``actions`` out) over ``roster`` (who is alive), ``placement`` (who holds which
+  vertex), ``jobs`` and ``pushes`` (the cycle's push jobs) and ``tasks`` (the Task
+  builders); ``planner`` (one cycle's plan from a snapshot), ``config``;
 * ``node``: the Zenoh process around the deployer.
 
 This package re-exports the topology core (and ``wrap`` and ``circular_mean``), so

@@ -46,4 +46,34 @@ class Done:
 
 Action = Union[SendTask, SpawnRobot, RemoveRobot, PublishComplex, Done]
 
-__all__ = ["Action", "Done", "PublishComplex", "RemoveRobot", "SendTask", "SpawnRobot"]
+
+class Outbox:
+    """The actions of one deployer step, in order, and the ids of the tasks they send.
+
+    Task ids are ``epoch * 1_000_000 + n`` with n counting up from 1 (a restarted
+    coordinator takes a new epoch, or raises n past the ids its agents report)."""
+
+    def __init__(self, epoch: int = 0):
+        self.epoch = epoch
+        self.next_task = 1
+        self.actions: list[Action] = []
+
+    def send(self, rid: int, task: Task) -> int:
+        """Number ``task`` and address it to robot ``rid``; returns its task id."""
+        task.task_id = self.epoch * 1_000_000 + self.next_task
+        self.next_task += 1
+        task.robot = rid
+        task.epoch = self.epoch
+        self.actions.append(SendTask(rid, task))
+        return task.task_id
+
+    def spawn(self, spawn: Spawn) -> int:
+        """Ask for the robot of ``spawn``; returns its id."""
+        self.actions.append(SpawnRobot(spawn))
+        return spawn.robot
+
+    def add(self, action: Action) -> None:
+        self.actions.append(action)
+
+
+__all__ = ["Action", "Done", "Outbox", "PublishComplex", "RemoveRobot", "SendTask", "SpawnRobot"]

@@ -7,10 +7,17 @@ from __future__ import annotations
 import math
 import dataclasses
 from dataclasses import dataclass
+from enum import StrEnum
 
 from bus.configcheck import ConfigError, check_fields
 
 from .topology.params import TopologyParams
+
+
+class PushMode(StrEnum):
+    """How the movers along a push's path go (``push_mode``; equal to its TOML string)."""
+    PARALLEL = "parallel"      # at once where >= 2 static landmarks exist
+    SEQUENTIAL = "sequential"  # strictly from the front, each once the one ahead arrived
 
 
 @dataclass(frozen=True)
@@ -134,4 +141,4 @@ _BOUNDS = {
     "max_cycles": (1, 10**12),
     "door_min_rv": (0.0, 2.0, True),
 }
-_CHOICES = {"push_mode": ("parallel", "sequential")}
+_CHOICES = {"push_mode": tuple(m.value for m in PushMode)}

@@ -153,15 +153,16 @@ def test_a_fresh_coordinator_resumes_from_statuses():
 
 def _started_steps(monkeypatch):
     """Record (step name, step, job) for every step the deployer starts."""
+    from coordinator.pushes import Pushes
     started = []
-    orig_start = Deployer._start
+    orig_start = Pushes.start
 
     def start(self, s, task, now):
         job = next((j for j in self.jobs if s in j.steps), None)
         started.append((s.name, s, job, task))
         return orig_start(self, s, task, now)
 
-    monkeypatch.setattr(Deployer, "_start", start)
+    monkeypatch.setattr(Pushes, "start", start)
     return started
 
 
@@ -290,12 +291,12 @@ def test_lattice_placement_covers_the_room(tmp_path, monkeypatch):
     source (from the bearing-only shape estimate). On the 6 m x 4 m room it certifies full
     coverage. (It no longer uses fewer robots than the spec's 60-deg rule there: seeds 1-6,
     47.7 against 46.7, since failed test drives block only their own direction.)"""
-    import coordinator.deployer as deployer
+    import coordinator.pushes as pushes
 
     cfg = load_config(_room6x4(tmp_path))
     sim = SimLoop(cfg, seed=1, coordinator_overrides={"lattice": True})
     jobs = []
-    orig, orig_retry = sim.dep.planner, deployer.replan_push
+    orig, orig_retry = sim.dep.planner, pushes.replan_push
 
     def planner(snap, params, **kw):
         plan = orig(snap, params, **kw)
@@ -308,7 +309,7 @@ def test_lattice_placement_covers_the_room(tmp_path, monkeypatch):
         return spec
 
     sim.dep.planner = planner
-    monkeypatch.setattr(deployer, "replan_push", retry)
+    monkeypatch.setattr(pushes, "replan_push", retry)
     res = sim.run(max_sim_s=3000, max_wall_s=200)
     assert res.certified, res.stop_reason
     assert _coverage(sim, res) >= 0.995
@@ -322,7 +323,7 @@ def test_lattice_placement_covers_the_room(tmp_path, monkeypatch):
 
 def _job(path, *, feed=None, occ=None, enter=True):
     """A PushJob as the deployer builds it (robot ids = 100 + vertex unless ``occ``)."""
-    from coordinator.deployer import PushJob, Step
+    from coordinator.jobs import PushJob, Step
     from coordinator.planner import JobSpec
     occ = occ or {v: 100 + v for v in path}
     job = PushJob(JobSpec(path=list(path), direction=0.0, deploy_landmarks=[], deploy_bearings=[],
@@ -339,7 +340,8 @@ def _job(path, *, feed=None, occ=None, enter=True):
 
 
 def test_a_push_whose_test_drive_touched_hands_its_source_robot_to_the_next_push():
-    src = Deployer._source_robot
+    from coordinator.jobs import PushJob
+    src = PushJob.source_robot
     a = _job([0, 1, 2])
     b = _job([0, 3, 4], feed=a)
     c = _job([0, 5], feed=b)
@@ -350,11 +352,11 @@ def test_a_push_whose_test_drive_touched_hands_its_source_robot_to_the_next_push
     a = _job([0, 1, 2])
     b = _job([0, 3, 4], feed=a)
     c = _job([0, 5], feed=b)
-    Deployer._cancel(None, a, "test drive touched an obstacle")
+    a.cancel("test drive touched an obstacle")
     a.step("test_drive").state = "failed"
     assert src(b) == 100
     # and when b stops too, before it got a's robot, c takes it
-    Deployer._cancel(None, b, "test drive touched an obstacle")
+    b.cancel("test drive touched an obstacle")
     assert src(c) == 100
     # a one-vertex push whose own robot (at the source) test-drove and came back
     a1 = _job([0])
@@ -385,7 +387,7 @@ def test_the_contact_a_failed_test_drive_reports_is_never_taken_for_a_wall_at_th
     job = _job([v], occ={v: rid})
     dep.jobs.append(job)
     td = job.step("test_drive")
-    dep._start(td, Task(kind="test_drive", vertex=v, direction=1.8, distance=0.9), 0.0)
+    dep.pushes.start(td, Task(kind="test_drive", vertex=v, direction=1.8, distance=0.9), 0.0)
     seq = iter(range(1, 100))
 
     def status(task_id, task_state, bearing):
@@ -404,17 +406,18 @@ def test_the_contact_a_failed_test_drive_reports_is_never_taken_for_a_wall_at_th
 
 @pytest.mark.slow
 @pytest.mark.timeout(240)
-def test_one_touch_at_the_front_no_longer_cancels_the_other_pushes_from_the_source():
+def test_one_touch_at_the_front_no_longer_cancels_the_other_pushes_from_the_source(monkeypatch):
+    from coordinator.jobs import PushJob
     cancelled = []
     cfg = load_config("configs/small.toml")
     sim = SimLoop(cfg, seed=0)
-    orig = sim.dep._cancel
+    orig = PushJob.cancel
 
     def spy(job, why):
         cancelled.append(why)
         return orig(job, why)
 
-    sim.dep._cancel = spy
+    monkeypatch.setattr(PushJob, "cancel", spy)
     res = sim.run(max_sim_s=4000, max_wall_s=200)
     assert res.certified, res.stop_reason
     assert "test drive touched an obstacle" in cancelled

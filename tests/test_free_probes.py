@@ -15,7 +15,9 @@ from bus.messages import Status
 from coordinator import build_complex, detect_fence
 from coordinator.actions import SendTask
 from coordinator.config import CoordinatorConfig
-from coordinator.deployer import Deployer, Robot
+from coordinator.deployer import Deployer
+from coordinator.jobs import make_job
+from coordinator.roster import Robot
 from coordinator.topology.evidence import Evidence, probe_key
 from coordinator.topology.params import TopologyParams
 from coordinator.planner import Snapshot, plan_cycle, replan_push
@@ -132,7 +134,6 @@ def test_a_returned_probe_is_never_offered_free_again_but_paths_still_may_take_i
 def _deployer(snap):
     dep = Deployer(CoordinatorConfig(), sources=[90 * DEG])
     dep.snapshot = snap
-    dep._snap_vertex_of = {r: v for v, r in snap.occupant.items()}
     seq = iter(range(1, 10_000))
     for v, rid in snap.occupant.items():
         dep.vertex_of[rid] = v
@@ -144,7 +145,7 @@ def _deployer(snap):
 
 
 def _tasks(dep):
-    return [a.task for a in dep._out if isinstance(a, SendTask)]
+    return [a.task for a in dep.out.actions if isinstance(a, SendTask)]
 
 
 def _start_free_probe():
@@ -154,10 +155,10 @@ def _start_free_probe():
     spec = next(j for j in _plan(snap, free_probes=True).jobs if j.free)
     f, rid = spec.path[0], snap.occupant[spec.path[0]]
     dep, seq = _deployer(snap)
-    job = dep._make_job(spec)
+    job = make_job(spec, snap.occupant)
     dep.jobs = [job]
-    dep._out = []
-    dep._advance_job(job, 1.0)
+    dep.out.actions = []
+    dep.pushes.advance(job, 1.0)
     (td,) = _tasks(dep)
     return snap, spec, f, rid, dep, seq, job, td
 
@@ -169,8 +170,8 @@ def test_a_clear_free_probe_goes_back_home_and_is_booked_as_returned():
     # the drive found room: the agent reports it done where it ended
     dep.on_status(Status(robot=rid, seq=next(seq), t=2.0, state="holding", vertex=f,
                          task_id=td.task_id, task_state="done"))
-    dep._out = []
-    dep._advance_job(job, 2.0)
+    dep.out.actions = []
+    dep.pushes.advance(job, 2.0)
     (home,) = _tasks(dep)
     # home: goto its own vertex on its neighbours' robots and its own recorded bearings
     assert home.kind == "goto" and home.vertex == f and home.robot == rid
@@ -179,8 +180,8 @@ def test_a_clear_free_probe_goes_back_home_and_is_booked_as_returned():
     assert job.step("deploy").state == "cancelled" and job.step("refine").state == "cancelled"
     assert dep.evidence.returned_probes() == {_key(spec)}
     assert not dep.evidence.clear_probes() and not dep.evidence.failed_probes()
-    dep._out = []
-    dep._advance_job(job, 2.5)                     # nothing more to send
+    dep.out.actions = []
+    dep.pushes.advance(job, 2.5)                     # nothing more to send
     assert not _tasks(dep)
     dep.on_status(Status(robot=rid, seq=next(seq), t=3.0, state="holding", vertex=f,
                          task_id=home.task_id, task_state="done"))
@@ -196,13 +197,13 @@ def test_a_free_probe_that_touched_books_evidence_and_tries_its_next_probe():
     snap, spec, f, rid, dep, seq, job, td = _start_free_probe()
     dep.on_status(Status(robot=rid, seq=next(seq), t=2.0, state="holding", vertex=f,
                          task_id=td.task_id, task_state="failed", reason="touch"))
-    dep._out = []
-    dep._advance_job(job, 2.0)
+    dep.out.actions = []
+    dep.pushes.advance(job, 2.0)
     assert _key(spec) in dep.evidence.failed_probes()
     assert not dep.evidence.returned_probes()
     # re-planned at once at the same vertex, still free, another probe
     assert job.spec.free and job.spec.path == [f] and job.spec.kind == "probe"
     assert _key(job.spec) != _key(spec)
-    dep._advance_job(job, 2.0)
+    dep.pushes.advance(job, 2.0)
     (td2,) = _tasks(dep)
     assert td2.kind == "test_drive" and td2.robot == rid and td2.vertex == f

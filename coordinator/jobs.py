@@ -1,0 +1,139 @@
+"""A push job (spec 4.3) as data: its steps, their names and states, and the pure rules on them.
+
+A push along a path p0 -> ... -> pm = f is a :class:`PushJob` of :class:`Step` s, one per
+robot task: test drive at f, deploy f's robot, the movers p_t -> p_{t+1}, a new robot
+entering p0, refine, settle. No I/O and no clock: :class:`coordinator.pushes.Pushes` runs
+them. Vertex and robot ids are ints; ``Step.started_t`` is sim seconds.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+from .planner import JobSpec, Snapshot
+from .topology.evidence import Evidence
+
+
+class StepName(StrEnum):
+    """What a step's robot does (a StrEnum: equal to the names the logs have always used)."""
+    TEST_DRIVE = "test_drive"   # drive from f along the deployment direction and back
+    DEPLOY = "deploy"           # f's robot to the new vertex
+    MOVE = "move"               # p_t's robot to p_{t+1}
+    ENTER = "enter"             # a new robot from the base to p0
+    REFINE = "refine"           # the deployed robot re-homes once f is held again
+    SETTLE = "settle"           # a mover that homed on < 2 landmarks homes on all
+    HOME = "home"               # a free probe that drove clear goes back to its vertex
+
+
+class StepState(StrEnum):
+    PENDING = "pending"
+    RUNNING = "running"
+    DONE = "done"
+    FAILED = "failed"
+    CANCELLED = "cancelled"
+
+
+OVER = (StepState.DONE, StepState.FAILED)                  # the robot is there or near
+FINISHED = (StepState.DONE, StepState.FAILED, StepState.CANCELLED)
+
+
+@dataclass
+class Step:
+    """One robot's task within a push job."""
+    name: StepName
+    robot: int                    # -1 for "enter" until the new robot exists
+    target: int                   # target vertex id
+    t_index: int = -1             # for "move": index t of p_t -> p_{t+1}
+    task_id: int = -1
+    state: StepState = StepState.PENDING
+    reason: str = ""
+    started_t: float = 0.0
+    n_landmarks: int = -1         # landmarks of the goto/hold task it was started with
+    touch_offset: float = 0.0     # failed test drive: touch sector centre - direction (rad)
+
+
+@dataclass
+class PushJob:
+    spec: JobSpec
+    steps: list[Step] = field(default_factory=list)
+    aborted: bool = False
+    feed: "PushJob | None" = None   # earlier job at the same source: its new robot moves here
+    retries: int = 0                # times its test drive touched and it was re-planned
+
+    def steps_at_source(self) -> "Step | None":
+        """The step that moves the robot away from p0 (deploy when the path is just p0)."""
+        if len(self.spec.path) == 1:
+            return self.step(StepName.TEST_DRIVE) or self.step(StepName.DEPLOY)
+        return self.step(StepName.MOVE, 0)
+
+    def step(self, name: str, t_index: int = -1) -> Step | None:
+        for s in self.steps:
+            if s.name == name and s.t_index == t_index:
+                return s
+        return None
+
+    @property
+    def finished(self) -> bool:
+        return all(s.state in FINISHED for s in self.steps)
+
+    def cancel(self, why: str) -> None:
+        """Abort the push: its pending steps never start."""
+        self.aborted = True
+        for s in self.steps:
+            if s.state == StepState.PENDING:
+                s.state, s.reason = StepState.CANCELLED, why
+
+    def source_robot(self):
+        """The robot that leaves p0 in this job (fed by an earlier job at the same source):
+        its id, None while it is still entering, False if it never will.
+
+        An earlier job that stopped before its own robot left p0 (a failed test drive: the
+        robot drove back) hands that robot on, so one touch no longer cancels every later
+        push from the source."""
+        feed = self.feed
+        while feed is not None:
+            s0 = feed.steps_at_source()
+            if feed.aborted and s0 is not None and (
+                    s0.state in (StepState.PENDING, StepState.CANCELLED)
+                    or (s0.name == StepName.TEST_DRIVE and s0.state == StepState.FAILED
+                        and s0.reason.startswith("touch"))):
+                if s0.robot >= 0:
+                    return s0.robot
+                feed = feed.feed
+                continue
+            ent = feed.step(StepName.ENTER)
+            if ent is None or feed.aborted or ent.state in (StepState.FAILED,
+                                                             StepState.CANCELLED):
+                return False
+            return ent.robot if ent.state == StepState.DONE else None
+        return False
+
+
+def make_job(spec: JobSpec, occupant: dict[int, int]) -> PushJob:
+    """The steps of a planned push, robots taken from the snapshot's ``occupant``."""
+    job = PushJob(spec)
+    path = spec.path
+    f = path[-1]
+    if spec.test_drive:
+        job.steps.append(Step(StepName.TEST_DRIVE, occupant[f], f))
+    job.steps.append(Step(StepName.DEPLOY, occupant[f], spec.new_vertex))
+    for t in range(len(path) - 2, -1, -1):
+        job.steps.append(Step(StepName.MOVE, occupant[path[t]], path[t + 1], t_index=t))
+    if spec.enter_source is not None:
+        job.steps.append(Step(StepName.ENTER, -1, path[0]))
+    job.steps.append(Step(StepName.REFINE, occupant[f], spec.new_vertex))
+    return job
+
+
+def evidence_kwargs(evidence: Evidence, snap: Snapshot) -> dict:
+    """What the planner takes of the evidence on ``snap``: the fence's keyword arguments
+    (less the failed directions, passed as ``test_drive_failures``)."""
+    kw = evidence.fence_kwargs(snap.occupant)
+    kw.pop("test_drive_failures")
+    return kw
+
+
+def drive_failures(evidence: Evidence, snap: Snapshot) -> dict[int, list[float]]:
+    """vertex -> directions (rad) of drives from it that touched, at ``snap``'s vertices."""
+    return {v: b for v, b in evidence.failed_directions().items() if v in snap.occupant}
+

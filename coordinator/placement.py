@@ -1,0 +1,132 @@
+"""Where the robots are in the complex: which robot holds which vertex, and the cycle's snapshot.
+
+Pure book-keeping, no I/O. Vertices are integer ids (sources first: vertex k is source k);
+bearings are radians in the recording robot's frame; drive lengths are metres. The
+deployer's :meth:`coordinator.deployer.Deployer.build_snapshot` is :meth:`Placement.snapshot`.
+"""
+from __future__ import annotations
+
+from ground.angles import wrap
+
+from .planner import Snapshot
+from .roster import Roster
+
+SETTLED_STATES = ("holding", "idle")
+
+
+def near_any(bearing: float, bearings, tol: float = 0.02) -> bool:
+    """Whether ``bearing`` is within ``tol`` rad of one of ``bearings`` (a contact seen
+    again: the agent keeps reporting a pinned contact)."""
+    return any(abs(wrap(bearing - b)) < tol for b in bearings)
+
+
+class Placement:
+    """Robots on vertices, the vertex ids handed out, and what is known about the vertices."""
+
+    def __init__(self, n_sources: int):
+        self.vertex_of: dict[int, int] = {}          # robot -> vertex
+        self.next_vertex = n_sources
+        self.known: list[tuple[int, int, float]] = []  # (f, new vertex, clear drive length)
+        self.contact: dict[int, float] = {}          # vertex -> sticky contact bearing
+        self.td_contacts: dict[int, list[float]] = {}  # vertex -> contacts of failed drives
+        self.redundant: set[int] = set()             # vertices
+        self.left: set[int] = set()                  # robots sent away (redundant, idle)
+
+    def new_vertex(self) -> int:
+        v = self.next_vertex
+        self.next_vertex += 1
+        return v
+
+    def note_contact(self, v: int, st, td_failed: bool) -> None:
+        """The contact a Status from the robot at vertex ``v`` reports. ``td_failed``: the
+        status ends a test drive that touched (of a push in flight).
+
+        Back from a test drive that touched, its contact is the drive's (the agent pins it),
+        felt out there, not a wall at the vertex. Recorded on the first status that reports
+        the failure: the job hears of it only later, and this status used to be adopted as
+        a resting contact first (corridor_doors, eps_rv = 0.05: 46 of 53 adopted contacts
+        were test-drive contacts, and a door was closed by one, certified at 81% coverage)."""
+        if st.contact and st.task_state == "failed" and td_failed:
+            tdc = self.td_contacts.setdefault(v, [])
+            if not near_any(st.contact_bearing, tdc):
+                tdc.append(st.contact_bearing)
+        if (st.contact and st.state == "holding" and st.vertex == v
+                and st.task_state != "running"
+                and not near_any(st.contact_bearing, self.td_contacts.get(v, ()))):
+            self.contact[v] = st.contact_bearing
+
+    def vacate(self, rid: int) -> None:
+        """Robot ``rid`` is gone: its vertex is free, and the contact felt there forgotten."""
+        v = self.vertex_of.pop(rid, None)
+        if v is not None:
+            self.contact.pop(v, None)
+
+    def members(self, roster: Roster) -> list[int]:
+        """Robots in the complex: alive, holding a vertex, not sent away (sorted ids)."""
+        out = []
+        for rid, v in self.vertex_of.items():
+            r = roster.get(rid)
+            if r is None or r.dead or not r.alive or r.status is None or rid in self.left:
+                continue
+            out.append(rid)
+        return sorted(out)
+
+    def all_settled(self, roster: Roster) -> bool:
+        """Every member's agent reports no running task and a settled state."""
+        for rid in self.members(roster):
+            st = roster.get(rid).status
+            if st.task_state == "running" or st.state not in SETTLED_STATES:
+                return False
+        return True
+
+    def holders(self, roster: Roster) -> dict[int, int]:
+        """vertex -> the live robot holding it now."""
+        return {u: r for r, u in self.vertex_of.items() if roster.live(r)}
+
+    def snapshot(self, roster: Roster, sources: list[float]) -> Snapshot:
+        """The complex as the members see it now (``sources``: base headings by index)."""
+        members = self.members(roster)
+        vert: dict[int, int] = {}
+        taken: set[int] = set()
+        for rid in members:
+            v = self.vertex_of[rid]
+            if v in taken:
+                # two robots claim one vertex (a restart after an interrupted push): the
+                # second one is a position of its own
+                v = self.vertex_of[rid] = self.next_vertex
+                self.next_vertex += 1
+            taken.add(v)
+            vert[rid] = v
+        nbrs: dict[int, dict[int, float]] = {}
+        for rid in members:
+            st = roster.get(rid).status
+            d = {}
+            for n, b in zip(st.nbr_ids, st.nbr_bearings):
+                if n in vert and n != rid:
+                    d[vert[n]] = b
+            nbrs[vert[rid]] = d
+        occupant = {v: r for r, v in vert.items()}
+        contact = {v: b for v, b in self.contact.items() if v in occupant}
+        kinds = {v: roster.get(r).kind for v, r in occupant.items()}
+        known = [(a, b, d) for a, b, d in self.known if a in occupant and b in occupant]
+        return Snapshot(occupant=occupant, nbrs=nbrs, contact=contact, kinds=kinds,
+                        sources=[k for k in range(len(sources)) if k in occupant],
+                        source_dirs=sources, known=known)
+
+
+def stray_vertices(snap: Snapshot, n_sources: int) -> set[int]:
+    """Vertices in components of the (mutual-visibility) graph that hold no source: robots
+    that lost the swarm (a failed move, a failure that cut the graph). No path can reach
+    them, so their frontier could never close; they are sent away instead."""
+    present = [k for k in range(n_sources) if k in snap.occupant]
+    if not present:
+        return set()
+    seen = set(present)
+    stack = list(present)
+    while stack:
+        v = stack.pop()
+        for u in snap.nbrs.get(v, {}):
+            if u not in seen and v in snap.nbrs.get(u, {}):
+                seen.add(u)
+                stack.append(u)
+    return set(snap.occupant) - seen

@@ -1,0 +1,214 @@
+"""The Task messages a push sends its robots (spec 4.4-4.7), built from the cycle's snapshot.
+
+Pure functions of their arguments, no I/O and no state: :class:`TaskBuilder` reads the
+snapshot, the roster (who is alive, their current mutual bearings) and the configuration,
+and returns :class:`bus.messages.Task` objects without ids (the outbox numbers them). The
+caller says which vertices are moving this cycle. Units: distances in metres, bearings and
+frame offsets in radians, timeouts in seconds.
+"""
+from __future__ import annotations
+
+import math
+
+from bus.messages import Task
+from ground.angles import wrap
+
+from .config import CoordinatorConfig
+from .planner import JobSpec, Snapshot
+from .roster import Roster
+
+
+def td_length(spec: JobSpec, params) -> float:
+    """How far a job's test drive goes: the planner's distance, else the configured d_td."""
+    return params.d_td if spec.distance is None else spec.distance
+
+
+class TaskBuilder:
+    """Task builders for one snapshot. ``moving``: the vertices whose occupants move this
+    cycle (their robots are no landmarks)."""
+
+    def __init__(self, cfg: CoordinatorConfig, params, roster: Roster, snap: Snapshot):
+        self.cfg = cfg
+        self.params = params
+        self.roster = roster
+        self.snap = snap
+        self.snap_vertex_of = {r: v for v, r in snap.occupant.items()}  # robot -> vertex
+
+    # ------------------------------------------------------------------ frames
+    def ref_offsets(self, recorder_vertex: int, landmark_vertices: list[int]) -> list[float]:
+        """Frame alignment data (spec 4.7): heading of the recorder minus each landmark's
+        heading, from mutual bearings. [] when every robot is holonomic (frames parallel)."""
+        snap = self.snap
+        if all(k == "holonomic" for k in snap.kinds.values()):
+            return []
+        out = []
+        for u in landmark_vertices:
+            if u < 0:
+                return []
+            a = snap.nbrs.get(recorder_vertex, {}).get(u)
+            b = snap.nbrs.get(u, {}).get(recorder_vertex)
+            if a is None or b is None:
+                return []
+            out.append(wrap(b - a + math.pi))
+        return out
+
+    def chained_offsets(self, f: int, lm: list[int]) -> list[float]:
+        """ref_offsets for bearings recorded by f's occupant in the snapshot (spec 4.7).
+        Landmarks that held a neighbour vertex of f then: from the snapshot's mutual
+        bearings; a robot that moved there since (the one now holding f, or the robot
+        ahead on a push): chained through a static landmark and the robots' current Status.
+        [] when every robot is holonomic, or when some landmark cannot be aligned."""
+        snap = self.snap
+        if all(k == "holonomic" for k in snap.kinds.values()):
+            return []
+        static = {}
+        for r in lm:
+            u = self.snap_vertex_of.get(r, -1)
+            if u >= 0 and u != f:
+                o = self.ref_offsets(f, [u])
+                if o:
+                    static[r] = o[0]
+        out = []
+        for r in lm:
+            if r in static:
+                out.append(static[r])
+                continue
+            got = None
+            for s, o in static.items():
+                m = self.roster.mutual(s, r)
+                if m is not None:
+                    got = wrap(o + m)
+                    break
+            if got is None:
+                return []
+            out.append(got)
+        return out
+
+    # ------------------------------------------------------------------ landmarks
+    def vertex_landmarks(self, v: int, exclude: set[int]) -> tuple[list[int], list[float]]:
+        """Occupants of v's neighbour vertices (minus ``exclude``) and v's recorded bearings."""
+        snap = self.snap
+        lm, br = [], []
+        for u, b in sorted(snap.nbrs.get(v, {}).items()):
+            if u in exclude or u not in snap.occupant or not self.roster.live(snap.occupant[u]):
+                continue
+            lm.append(snap.occupant[u])
+            br.append(b)
+        return lm, br
+
+    def _static_landmarks(self, spec: JobSpec, moving: set[int], at_f: int | None = None):
+        """The landmarks of the assumed geometry (spec.deploy_landmarks) held by a live
+        robot that stays put; vertex f itself only as ``at_f``, the robot now there."""
+        occ = self.snap.occupant
+        f = spec.path[-1]
+        lm, br = [], []
+        for v, b in zip(spec.deploy_landmarks, spec.deploy_bearings):
+            if v == f:
+                if at_f is not None:
+                    lm.append(at_f)
+                    br.append(b)
+            elif v in occ and v not in moving and self.roster.live(occ[v]):
+                lm.append(occ[v])
+                br.append(b)
+        return lm, br
+
+    # ------------------------------------------------------------------ tasks
+    def goto(self, v: int, lm: list[int], br: list[float]) -> Task:
+        """The goto task to vertex v on the landmark robots ``lm`` at v's recorded bearings
+        ``br`` (their chained frame offsets, the configured timeout)."""
+        return Task(kind="goto", vertex=v, landmarks=lm, bearings=br,
+                    ref_offsets=self.chained_offsets(v, lm), timeout_s=self.cfg.task_timeout_s)
+
+    def test_drive(self, spec: JobSpec) -> Task:
+        f = spec.path[-1]
+        lm, br = self.vertex_landmarks(f, exclude=set())
+        task = Task(kind="test_drive", vertex=f, landmarks=lm, bearings=br,
+                    ref_offsets=self.chained_offsets(f, lm),
+                    direction=spec.direction,
+                    distance=td_length(spec, self.params),
+                    keep_after=self.cfg.wall_keep_rv * self.cfg.rv,
+                    timeout_s=self.cfg.task_timeout_s)
+        if spec.kind == "probe":
+            # a probe's touch anywhere within its depth is evidence (the ends' disks cover
+            # the way there): it goes home rather than stay against the wall (keep_after 0)
+            task.keep_after = 0.0
+        if spec.via_frac > 0:
+            # a probe: first to the point at via_frac of the edge, on landmarks that stay
+            # put (the push's movers wait for the test drive)
+            occ = self.snap.occupant
+            for v, b in zip(spec.via_landmarks, spec.via_bearings):
+                r = occ.get(v)
+                if r is not None and self.roster.live(r) and r in lm:
+                    task.via_landmarks.append(r)
+                    task.via_bearings.append(b)
+            task.via_distance = spec.via_frac * self.cfg.d0
+        return task
+
+    def deploy(self, spec: JobSpec, moving: set[int]) -> Task:
+        """Frontier robot to the new position (spec 4.4): homing on the static landmarks of
+        the assumed geometry if there are >= 2, else open loop along the deployment
+        direction (spec 4.6), keeping the single landmark in sight."""
+        f = spec.path[-1]
+        lm, br = self._static_landmarks(spec, moving)
+        dist = ((self.cfg.d0 if spec.distance is None else spec.distance)
+                - (td_length(spec, self.params) if spec.test_drive else 0.0))
+        task = Task(kind="deploy", vertex=spec.new_vertex, landmarks=lm, bearings=br,
+                    direction=spec.direction, distance=max(0.0, dist),
+                    timeout_s=self.cfg.task_timeout_s)
+        if len(lm) >= 2:
+            task.ref_offsets = self.chained_offsets(f, lm)
+        return task
+
+    def refine(self, spec: JobSpec, moving: set[int], at_f: int | None) -> Task | None:
+        """The deployed robot re-homes on every landmark of the assumed geometry now that a
+        robot holds f again (``at_f``, None if none arrived; equilateral on |fj|, spec 4.4),
+        with scale correction when due. None with fewer than 2 landmarks."""
+        f = spec.path[-1]
+        lm, br = self._static_landmarks(spec, moving, at_f)
+        if len(lm) < 2:
+            return None
+        return Task(kind="deploy", vertex=spec.new_vertex, landmarks=lm, bearings=br,
+                    ref_offsets=self.chained_offsets(f, lm),
+                    scale_correct=spec.scale_correct or len(lm) == 2,
+                    timeout_s=self.cfg.task_timeout_s)
+
+    def settle(self, rid: int, v: int, busy: set[int], holder: dict[int, int]) -> Task | None:
+        """goto v on the robots holding v's neighbour vertices now (``holder``: vertex ->
+        robot; None if < 2), leaving out the ``busy`` vertices other unfinished pushes are
+        still moving."""
+        lm, br = [], []
+        for u, b in sorted(self.snap.nbrs.get(v, {}).items()):
+            r = holder.get(u)
+            if u in busy or r is None or r == rid:
+                continue
+            lm.append(r)
+            br.append(b)
+        if len(lm) < 2:
+            return None
+        return self.goto(v, lm, br)
+
+    def move(self, path: list[int], t: int, moving: set[int], ahead: int | None) -> Task | None:
+        """Task for the robot moving p_t -> p_{t+1} (t = -1: the new robot entering p0).
+
+        Landmarks: occupants of the target's neighbours that are not ``moving`` this cycle;
+        plus ``ahead``, the robot now at p_{t+2} once it has arrived (sequential fallback).
+        Returns None when no landmark at all is available (the mover then just holds).
+        """
+        target = path[t + 1]
+        lm, br = self.vertex_landmarks(target, exclude=moving)
+        if ahead is not None and t + 2 < len(path):
+            b = self.snap.nbrs.get(target, {}).get(path[t + 2])
+            if b is not None:
+                lm.append(ahead)
+                br.append(b)
+        if not lm:
+            return None
+        task = self.goto(target, lm, br)
+        # direction hint: the target vertex as seen from the mover's vertex; the agent
+        # creeps along it while fewer than 2 landmarks are in view (spec 4.6)
+        src = path[t] if t >= 0 else None
+        d = self.snap.nbrs.get(src, {}).get(target) if src is not None else None
+        if d is not None:
+            task.direction = d
+            task.distance = self.cfg.d0
+        return task
