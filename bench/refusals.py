@@ -16,8 +16,10 @@ with the true positions:
 
 It also pairs the odd vertices by a minimum T-join in hops (exact matching DP) and,
 for every map, reruns ``certify`` with wider closure zones (edges within k hops of an odd
-vertex, k = 1 (current), 2, 3, and 'all' (any edge)), so one campaign gives refusals and
+vertex, k = 1, 2, 3, and 'all' (any edge), adding edges only) and with closures that may
+also drop target edges within k hops ('k1t', 'k2t'), so one campaign gives refusals and
 false certificates per variant (claim = certified with no frontier, no deployment).
+``certify`` itself searches k = 1 with only fold edges droppable, then 'k1t'.
 
 Usage: python bench/refusals.py --maps 500 --seed 0 --jobs 2 --out R.json
        python bench/refusals.py --only 49 57 --seed 0
