@@ -240,7 +240,7 @@ def _listof(typ: Any) -> Any:
     return Annotated[list[typ], msgspec.Meta(max_length=_MAX_LIST)]
 
 
-def _wire_type(meta: dict) -> Any:
+def wire_type(meta: dict) -> Any:
     """The msgspec type of a field, from its f_* declaration: the same types, bounds,
     choices and length caps its checker enforces. msgspec accepts ints for floats (made
     floats) and rejects bools for ints, as the checkers do."""
@@ -274,7 +274,7 @@ def _wire_struct(cls) -> type:
     unknown fields."""
     spec: list = [("_v", Literal[cls.VERSION])]
     for f in dataclasses.fields(cls):
-        typ = _wire_type(f.metadata)
+        typ = wire_type(f.metadata)
         if not f.metadata.get("optional"):
             spec.append((f.name, typ))
         elif f.default_factory is not dataclasses.MISSING:

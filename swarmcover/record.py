@@ -70,39 +70,16 @@ RAW_SCHEMA = "swarmcover.Raw"
 
 # --------------------------------------------------------------------------- schemas
 
-_NUM_KINDS = {"f_float": "number", "f_int": "integer"}
-
-
 def _field_schema(f: dataclasses.Field) -> dict:
-    """JSON-schema of one message field, read from its checker (bus.messages f_* helpers)."""
-    check = f.metadata.get("check")
-    maker = check.__qualname__.split(".")[0] if check is not None else ""
-    env = {}
-    if check is not None and check.__closure__:
-        env = {n: c.cell_contents for n, c in zip(check.__code__.co_freevars, check.__closure__)}
-    rng = {k: env[v] for k, v in (("minimum", "lo"), ("maximum", "hi")) if v in env}
-    default = None if f.default is dataclasses.MISSING else f.default
-    if maker in _NUM_KINDS:
-        out = {"type": _NUM_KINDS[maker], **rng}
-    elif maker == "f_bool":
-        out = {"type": "boolean"}
-    elif maker == "f_str":
-        out = {"type": "string", "maxLength": env.get("maxlen")}
-        if env.get("choices"):
-            out["enum"] = list(env["choices"])
-    elif maker in ("f_floats", "f_ints"):
-        item = {"type": "number" if maker == "f_floats" else "integer", **rng}
-        out = {"type": "array", "items": item}
-    elif maker == "f_bools":
-        out = {"type": "array", "items": {"type": "boolean"}}
-    elif maker == "f_polys":
-        out = {"type": "array", "description": "polygons, each a flat [x0, y0, x1, y1, ...]",
-               "items": {"type": "array", "items": {"type": "number", **rng}}}
-    else:  # a checker this module does not know: still name the Python type
-        out = {"type": "object", "description": f"python type {f.type}"}
-    if default is not None:
-        out["default"] = default
-    return {k: v for k, v in out.items() if v is not None}
+    """JSON schema of one message field: msgspec's schema of the field's wire type
+    (bus.messages.wire_type: the same types, bounds, choices and length caps decoding
+    enforces), with its default."""
+    out = msgspec.json.schema(m.wire_type(f.metadata))
+    if f.metadata["kind"] == "polys":
+        out["description"] = "polygons, each a flat [x0, y0, x1, y1, ...]"
+    if f.default is not dataclasses.MISSING and f.default is not None:
+        out["default"] = f.default
+    return out
 
 
 def schema_for(cls: type[m.Message]) -> dict:

@@ -47,7 +47,7 @@ def test_schema_describes_every_field_of_every_message():
     assert sense["bearings"]["items"]["maximum"] == pytest.approx(3.141592654589793)
     assert sense["ids"]["items"] == {"type": "integer", "minimum": 0, "maximum": 2**62}
     status = schema_for(m.Status)["properties"]
-    assert status["state"]["enum"] == list(m.AGENT_STATES)
+    assert sorted(status["state"]["enum"]) == sorted(m.AGENT_STATES)
     assert schema_for(m.WorldInfo)["properties"]["obstacles"]["items"]["type"] == "array"
     assert schema_for(m.Truth)["x-same-length"] == [["ids", "x", "y", "theta", "live"]]
 
@@ -226,12 +226,16 @@ def check_tools_decode_every_channel(path, last_truth: m.Truth) -> None:
     """What Foxglove/Lichtblick do: the ``mcap`` reader decodes every message of every
     channel (JSON, and the protobuf scene), and the last scene shows the robots of the
     last Truth, each with its id."""
+    from jsonschema import Draft202012Validator
     from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
     with open(path, "rb") as f:
         reader = make_reader(f, decoder_factories=[JsonDecoderFactory(),
                                                    ProtobufDecoderFactory()])
-        encodings = {c.message_encoding for c in reader.get_summary().channels.values()}
-        n, scenes, topics = 0, [], set()
+        summary = reader.get_summary()
+        encodings = {c.message_encoding for c in summary.channels.values()}
+        validators = {sid: Draft202012Validator(json.loads(sc.data))
+                      for sid, sc in summary.schemas.items() if sc.encoding == "jsonschema"}
+        n, scenes, topics, checked = 0, [], set(), 0
         for _, channel, _, decoded in reader.iter_decoded_messages():
             n += 1
             topics.add(channel.topic)
@@ -239,7 +243,11 @@ def check_tools_decode_every_channel(path, last_truth: m.Truth) -> None:
                 scenes.append(decoded)
             else:
                 assert isinstance(decoded, dict), channel.topic
-    assert encodings == {"json", "protobuf"} and n > 100
+                # every JSON message is valid against the schema its channel embeds
+                errors = [f"{list(e.absolute_path)}: {e.message}" for e in validators[channel.schema_id].iter_errors(decoded)]
+                assert not errors, (channel.topic, errors[:3])
+                checked += 1
+    assert encodings == {"json", "protobuf"} and n > 100 and checked == n - len(scenes)
     assert len(scenes) >= 3
     last = {e.id: e for e in scenes[-1].entities}
     assert set(last) >= {"walls", "sources", "robots", "robot_ids", "edges", "frontier",
