@@ -3,9 +3,12 @@
 Works on node ids, neighbour bearings (rad, body frame) and touch flags; never measured
 positions (``shape`` estimates the swarm's shape from those bearings). One module per
 concept: ``complex`` (the Rips complex from who-sees-whom), ``fence`` (frontier and
-obstacle edges), ``evidence`` (what closes a fence side), ``certificate`` (relative
-homology H2(R, F) over GF(2)), ``gf2`` (elimination), ``redundancy``, ``shape``, ``paths``
-(push paths on the fixed graph), ``targets`` (desired bearings), ``gvg``, ``params``.
+obstacle edges; its stages in ``fence_types``, ``fence_local``, ``fence_sides``,
+``fence_probes``, ``fence_deploy``), ``evidence`` (what closes a fence side),
+``certificate`` (relative homology H2(R, F) over GF(2)), ``solver`` (how certificate
+solves it: Morse matching and peeling), ``gf2`` (elimination), ``redundancy``, ``shape``,
+``paths`` (push paths on the fixed graph), ``targets`` (desired bearings), ``gvg``,
+``params``.
 
 Each module's ``__all__`` is the one list of what it exports; this package re-exports them
 (``coordinator`` re-exports them again, with ``wrap`` and ``circular_mean``).

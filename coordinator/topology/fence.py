@@ -17,343 +17,36 @@ Sides. For an edge with node ids u < v, side sigma = +1 is the side counter-cloc
 from v as seen by u (sign of theta^u_{v k} for an apex k on that side); seen from v the
 same physical side has sign -sigma. All sides in the results use this canonical
 orientation.
+
+Modules (one per stage, pure functions of the complex): ``fence_types`` (Deployment,
+FenceSide, FenceEdge, Fence), ``fence_local`` (per-vertex bearings and the local tests:
+exception, corner, reflex, touch), ``fence_sides`` (one-sidedness, open sides, the ends'
+rules), ``fence_probes`` (the evidence before a side closes), ``fence_deploy`` (the sides
+resolved and the deployments); here :func:`detect_fence` runs them in order and
+assembles z_raw, z_repair and z.
 """
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
 from typing import Mapping
 
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from ground.angles import circular_mean, wrap, wrap_array
 from .complex import Complex
-from .evidence import TILT_MATCH, needs_tilt, probe_depth_rv, probe_fractions
+from .fence_deploy import _SINGLE_CLEAR, resolve_sides, robot_deployments  # noqa: F401
+from .fence_local import (_DEEP, _REFLEX, _Local, _canon, _corner, _is_exception,  # noqa: F401
+                          _reflex, _sgn, _touch_ok)
+from .fence_probes import (_tilts_todo, corner_candidates, forced_marks, plan_probes,  # noqa: F401
+                           probe_evidence)
+from .fence_sides import (_CONTACT_CONE, _FAILED_CONE, _PI3, _TOUCH_MARGIN, Room,  # noqa: F401
+                          both_touch, corner_wait_marks, find_open_sides, one_sided, test_drive_rule)
+from .fence_types import Deployment, Fence, FenceEdge, FenceSide
 from .params import TopologyParams
 
 __all__ = ["Deployment", "FenceSide", "FenceEdge", "Fence", "detect_fence"]
 
 _I64 = np.int64
-_PI3 = math.pi / 3.0
-# A robot resting against a wall has no room within 90 deg of its contact. A failed test
-# drive says only that its own direction is blocked (the touch may be a door jamb to the
-# side): it blocks deployments within 30 deg of the direction driven. 90 deg cones around
-# the felt contact closed 0.9 m doors (corridor_doors certified at 77-84%).
-_FAILED_CONE = math.pi / 6.0
-_CONTACT_CONE = math.pi / 2.0
-# Both-touch rule (spec 3.4 i): each contact must point clearly into the open side, at
-# least _TOUCH_MARGIN off the edge's line. Two robots across the mouth of a passage touch
-# its two sides: their contacts point along the edge, away from each other, and the spec's
-# sign test then closed the passage on bearing noise. (With the margin the two contacts
-# are also within 120 deg of each other: one wall, or two walls meeting at a corner.)
-_TOUCH_MARGIN = math.pi / 6.0
-# A reflex open side (its wedge at an end wider than _REFLEX: the end sits where the front
-# turns, at the mouth of a passage) gets a second probe _DEEP off the edge once the 60-deg
-# drive touched; the side is closed only when that one touches too. A 0.5 m passage above a
-# box (structured, seed 1) was closed when the 60-deg drives from both ends of its mouth hit
-# the box, with the passage itself, straight ahead of one end, never driven into.
-_REFLEX = 7.0 * math.pi / 6.0
-_DEEP = 2.0 * math.pi / 3.0
-# Single-file ends offer every direction of their open wedge 60 deg apart that keeps this
-# far from every neighbour (a little under 60 deg, for bearing noise).
-_SINGLE_CLEAR = math.radians(50.0)
-# TopologyParams.corner_probes: convex-corner marks (spec 3.3 ii) make a side a probing
-# candidate rather than closing it (True), or close it as inferred 'convex_corner' (False).
-# Off by default: bench/truth.py seed 0 maps 0-12 with it on (and clear_infers on) ran
-# clutter maps 10, 11, 12 to the robot cap (99, 81, 80 robots; clear probes off box corners
-# place robots that form new corners), so tests/test_truth.py cannot pass either way; map
-# 11 (a free-standing box) is then still a false certificate by this rule (issue 21).
-# TopologyParams.clear_infers: a side whose probes are all done, some clear (room found,
-# its robot stayed) while the side is still one-sided: False leaves it frontier with no
-# deployment (uncertified); True closes it as inferred ('probe_clear'). bench/truth.py seed
-# 0 (corner probes off): False, maps 0-39: 14 fixed (all certified), 26 stuck (22 of them
-# >= 99.9 % covered: unreached probes from both ends, or a clear probe), 0 livelock, 0 cap,
-# 46.2 robots; True, maps 0-36: 21 certified, 16 stuck, no false certificate beyond False's
-# (#11 convex corner, #18 a 0.30 rv door). On by default: with it off, corridor_doors (seed
-# 0, in-process) stopped uncertified after 114 cycles with one such side left ("no
-# feasible push"). The closure is reported as inferred.
-
-
-@dataclass(frozen=True)
-class Deployment:
-    """Where a robot at ``vertex`` would send a new robot.
-
-    bearing: direction (rad) in the body frame of the robot at ``vertex``.
-    edge: fence edge (u, v) node ids with u < v, or None (single file / isolated robot).
-    sigma: canonical open side of ``edge`` (+1/-1), 0 when edge is None.
-    offset: theta_new, the signed angle (rad) from the edge direction to ``bearing``.
-    clearance: smallest |angle| (rad) between ``bearing`` and any neighbour bearing
-      (pi when the robot has no neighbour).
-    kind: 'edge', 'single_file', 'isolated' or 'probe'.
-    via_frac: probes only: the drive first goes from ``vertex`` to the point at this
-      fraction of the way toward the edge's other end (0: no approach leg, a plain
-      perpendicular test drive from ``vertex``), then along ``bearing``, perpendicular to
-      the edge into the open side ``sigma``.
-    depth_rv: how far (x rv) the drive along ``bearing`` goes; 0 for non-probes (the
-      configured test-drive length or the planner's placement).
-    tilt: probes only: 0 for a probe perpendicular to the edge; for a TILTED probe (its
-      perpendicular probe touched, coordinator.topology.evidence) the CCW angle (rad) from
-      the perpendicular to ``bearing``: the touch sector's centre, near the wall's normal.
-    A geometric harness executes a probe as: x = p + via_frac * (q - p), then drive from x
-    along the perpendicular for depth_rv * rv; a touch within the deployer's
-    wall_keep_rv sends the robot home (evidence of a wall), no touch leaves it there.
-    """
-
-    vertex: int
-    bearing: float
-    edge: tuple[int, int] | None
-    sigma: int
-    offset: float
-    clearance: float
-    kind: str
-    via_frac: float = 0.0
-    depth_rv: float = 0.0
-    tilt: float = 0.0
-
-
-@dataclass(frozen=True)
-class FenceSide:
-    """One open side of a fence edge.
-
-    kind: 'frontier' or 'obstacle'. reason (also ``why``): for obstacle sides 'probes'
-    (evidence: every probe of the side touched), or an inference: 'convex_corner' (the
-    occlusion rule of spec 3.3, pi/3 - 2 beta) or 'forced' (carried over by the caller); for
-    frontier sides 'open', or 'probing' (its ends say "no room", some probe is still
-    untried: only probes are offered on it). deploy_u / deploy_v: deployment bearings (rad)
-    in the body frames of u and v (None for obstacle and probing sides). offset_u / offset_v:
-    theta_new at u and at v.
-    """
-
-    sigma: int
-    kind: str
-    reason: str
-    deploy_u: float | None = None
-    deploy_v: float | None = None
-    offset_u: float | None = None
-    offset_v: float | None = None
-
-    @property
-    def why(self) -> str:
-        """How the side got its kind (the same as ``reason``)."""
-        return self.reason
-
-    @property
-    def inferred(self) -> bool:
-        """An obstacle side closed by inference, not by evidence (probes)."""
-        return self.kind == "obstacle" and self.reason != "probes"
-
-
-@dataclass(frozen=True)
-class FenceEdge:
-    """A fence edge: node ids u < v, its edge id in the complex, and its open sides."""
-
-    u: int
-    v: int
-    index: int
-    sides: tuple[FenceSide, ...]
-
-    @property
-    def one_sided(self) -> bool:
-        return len(self.sides) == 1
-
-    @property
-    def is_frontier(self) -> bool:
-        return any(s.kind == "frontier" for s in self.sides)
-
-    @property
-    def is_obstacle(self) -> bool:
-        return any(s.kind == "obstacle" for s in self.sides)
-
-
-@dataclass(frozen=True, eq=False)
-class Fence:
-    """Result of :func:`detect_fence`.
-
-    edges: every fence edge (in K or O), by edge id order.
-    frontier / obstacle / exceptions / z: edge ids (into ``Complex.edges``) of K, O,
-      the exception set E, and the one-sided fence edges z (the certificate target).
-    deployments: node id -> deployments available at that robot, best clearance first.
-    frontier_vertices / obstacle_vertices / fence_vertices: node ids.
-    inferred: (edge id, why) for every obstacle side closed by inference rather than by
-      probes ('convex_corner', 'forced', 'probe_clear'), by edge id.
-    """
-
-    edges: tuple[FenceEdge, ...]
-    frontier: np.ndarray
-    obstacle: np.ndarray
-    exceptions: np.ndarray
-    z: np.ndarray
-    z_raw: np.ndarray
-    z_repair: np.ndarray
-    deployments: Mapping[int, tuple[Deployment, ...]]
-    frontier_vertices: frozenset[int]
-    obstacle_vertices: frozenset[int]
-    fence_vertices: frozenset[int]
-    by_index: Mapping[int, FenceEdge] = field(default_factory=dict)
-    inferred: tuple[tuple[int, str], ...] = ()
-
-    @property
-    def done(self) -> bool:
-        """True when there is no frontier left (K empty and no deploying robot)."""
-        return not self.deployments
-
-
-def _sgn(a: float) -> int:
-    return 1 if a > 0.0 else (-1 if a < 0.0 else 0)
-
-
-class _Local:
-    """Per-vertex neighbour data, built lazily from the complex CSR."""
-
-    def __init__(self, cx: Complex):
-        self.indptr = cx.adjacency[0]
-        self.nbr = cx.adjacency[1]
-        self.eid = cx.adjacency[2]
-        self.brg = cx.adjacency[3]
-        self._d: dict[int, dict[int, float]] = {}
-
-    def bearings(self, p: int) -> dict[int, float]:
-        d = self._d.get(p)
-        if d is None:
-            a, b = int(self.indptr[p]), int(self.indptr[p + 1])
-            d = dict(zip(self.nbr[a:b].tolist(), self.brg[a:b].tolist()))
-            self._d[p] = d
-        return d
-
-    def nearest_on_side(self, p: int, ref: int, sigma: int, thin: float = 0.0):
-        """Neighbour l != ref of p with sign(theta^p_{ref l}) = sigma and the smallest
-        |angle|; returns (l, |angle|) or (None, None). thin: neighbours under this angle
-        that ref sees too are skipped (a near-collinear triangle p-ref-l whose side test
-        fell on this side by noise says nothing about the side)."""
-        d = self.bearings(p)
-        t0 = d[ref]
-        dref = self.bearings(ref) if thin > 0.0 else {}
-        best, best_a = None, None
-        for l, tl in d.items():
-            if l == ref:
-                continue
-            a = wrap(tl - t0)
-            if _sgn(a) == sigma:
-                aa = abs(a)
-                if aa < thin and l in dref:
-                    continue
-                if best_a is None or aa < best_a:
-                    best, best_a = l, aa
-        return best, best_a
-
-    def clearance(self, p: int, bearing: float) -> float:
-        d = self.bearings(p)
-        if not d:
-            return math.pi
-        return min(abs(wrap(bearing - t)) for t in d.values())
-
-    def gap(self, p: int, phi: float):
-        """Neighbours (a, b) bounding the angular gap of p containing bearing phi: a is
-        the nearest clockwise, b the nearest counter-clockwise. (None, None) if none."""
-        d = self.bearings(p)
-        if not d:
-            return None, None
-        a = min(d, key=lambda l: (wrap(phi - d[l]) % (2 * math.pi), l))
-        b = min(d, key=lambda l: (wrap(d[l] - phi) % (2 * math.pi), l))
-        return a, b
-
-    def same_gap(self, p: int, phi: float, psi: float) -> bool:
-        """True if bearings phi and psi of p lie in the same gap between neighbours."""
-        d = self.bearings(p)
-        if not d:
-            return True
-        two_pi = 2 * math.pi
-
-        def clear(a: float, b: float) -> bool:  # no neighbour strictly inside the CCW sweep a -> b
-            span = wrap(b - a) % two_pi
-            return not any(0.0 < wrap(t - a) % two_pi < span for t in d.values())
-
-        return clear(phi, psi) or clear(psi, phi)
-
-
-def _canon(p: int, q: int, side_at_p: int) -> int:
-    """Canonical side of edge {p, q} (local indices) from the side seen at p."""
-    return side_at_p if p < q else -side_at_p
-
-
-def _is_exception(L: _Local, u: int, v: int, sigma: int, apexes) -> bool:
-    """Tightened exception rule (spec 3.2 [P]) for edge (u, v) open on side sigma (at u)."""
-    Bu, Bv = L.bearings(u), L.bearings(v)
-    tu_v, tv_u = Bu[v], Bv[u]
-
-    def beyond(m: int) -> bool:
-        if m in Bu:
-            return _sgn(wrap(Bu[m] - tu_v)) == sigma
-        if m in Bv:
-            return _sgn(wrap(Bv[m] - tv_u)) == -sigma
-        return True
-
-    for k in apexes:
-        Bk = L.bearings(k)
-        tu, tv = Bk[u], Bk[v]
-        whole = wrap(tv - tu)
-        s = _sgn(whole)
-        if s == 0:
-            continue
-        W = abs(whole)
-        wedge = []
-        for m, tm in Bk.items():
-            if m == u or m == v:
-                continue
-            a = wrap(tm - tu) * s
-            if 0.0 < a < W:
-                wedge.append((a, m))
-        if not wedge:
-            continue
-        wedge.sort()
-        # monotone chain u -> m1 -> ... -> v through far-side wedge vertices only
-        reach: list[tuple[float, int]] = [(0.0, u)]
-        for a, m in wedge:
-            if not beyond(m):
-                continue
-            Bm = L.bearings(m)
-            if any(ap < a and p in Bm for ap, p in reach):
-                reach.append((a, m))
-        if any(p in Bv for _, p in reach[1:]):
-            return True
-    return False
-
-
-def _corner(L: _Local, p: int, q: int, k, gap, thr: float) -> bool:
-    """The convex-corner / occlusion case (spec 3.3 ii) at p for edge p-q: p's nearest
-    neighbour k on the open side is under thr from q, and q and k do not see each other.
-    Only then must an obstacle block the view between them; a k that q does see (a
-    near-collinear triangle whose side test fell on one side by noise) proves nothing, and
-    ``nearest_on_side(thin=thr)`` skips it (bench/truth.py map 11 certified 21.8 % of a room
-    through one; deploying at half its gap instead stacked robots on one point, map 129)."""
-    return k is not None and gap < thr and k not in L.bearings(q)
-
-
-def _reflex(L: _Local, p: int, q: int, sigma: int) -> bool:
-    """p's open wedge from its neighbour q, turning the sigma way, is reflex (> _REFLEX)."""
-    bp = L.bearings(p)
-    t0 = bp[q]
-    wedge = min(((sigma * (t - t0)) % (2.0 * math.pi) for l, t in bp.items() if l != q),
-                default=2.0 * math.pi)
-    return wedge > _REFLEX
-
-
-def _touch_ok(cx: Complex, L: _Local, p: int, tau: float) -> float | None:
-    """The contact bearing of p if it counts as an obstacle contact, else None.
-
-    A contact counts only if no neighbour is visible within tau of its direction.
-    """
-    if not cx.touch[p]:
-        return None
-    tb = float(cx.touch_bearing[p])
-    if math.isnan(tb):
-        return None
-    for t in L.bearings(p).values():
-        if abs(wrap(t - tb)) < tau:
-            return None
-    return tb
 
 
 def _repair_cycle(cx: Complex, z: np.ndarray, band: np.ndarray) -> np.ndarray:
@@ -398,16 +91,6 @@ def _repair_cycle(cx: Complex, z: np.ndarray, band: np.ndarray) -> np.ndarray:
             break
     return np.nonzero(toggled)[0]
 
-
-def _tilts_todo(needed, done) -> list[float]:
-    """The tilts (rad) of ``needed``, merged within evidence.TILT_MATCH, that no touched
-    tilt in ``done`` stands for."""
-    todo: list[float] = []
-    for t in needed:
-        if any(abs(wrap(t - d)) <= TILT_MATCH for d in (*done, *todo)):
-            continue
-        todo.append(float(t))
-    return todo
 
 
 def detect_fence(
@@ -498,372 +181,40 @@ def detect_fence(
     their open wedge 60 deg apart, once their dangling edges' deployments are gone.
     """
     P = params or TopologyParams()
-    E = cx.n_edges
-    te, B = cx.tri_edges, cx.bearings
-    # ---- one-sided test, vectorised over all triangle-edge incidences
-    pos = np.zeros(E, dtype=bool)
-    neg = np.zeros(E, dtype=bool)
-    if cx.n_triangles:
-        ab, ac, bc = te[:, 0], te[:, 1], te[:, 2]
-        s_ab = np.sign(wrap_array(B[ac, 0] - B[ab, 0]))  # apex c of edge ab, at a
-        s_ac = np.sign(wrap_array(B[ab, 0] - B[ac, 0]))  # apex b of edge ac, at a
-        s_bc = np.sign(wrap_array(B[ab, 1] - B[bc, 0]))  # apex a of edge bc, at b
-        e_all = np.concatenate([ab, ac, bc])
-        s_all = np.concatenate([s_ab, s_ac, s_bc])
-        pos[e_all[s_all > 0]] = True
-        neg[e_all[s_all < 0]] = True
-    cand = np.nonzero(~(pos & neg))[0]
-
     L = _Local(cx)
-    eptr, etri = cx.edge_triangles
-    tri = cx.triangles
-    ids = cx.ids
-    thr = P.corner_threshold
-    n_tri_at = np.diff(cx.vertex_triangles[0])
-
-    exceptions: list[int] = []
-    # per candidate: list of (sigma, offset_u, offset_v) and corner marks
-    open_sides: dict[int, list[list]] = {}
-    marks: dict[tuple[int, int], str] = {}
-    # convex corners seen from one end whose far end has a reflex open wedge on that side:
-    # (e, sigma) -> (far end, near end, far end's offset); closed once the far end has no
-    # room, a frontier side deployed from the far end only until then
-    corner_wait: dict[tuple[int, int], tuple[int, int, float | None]] = {}
-    for e in cand.tolist():
-        u, v = int(cx.edges[e, 0]), int(cx.edges[e, 1])
-        sides = ([1] if not pos[e] else []) + ([-1] if not neg[e] else [])
-        if len(sides) == 1:
-            tris = etri[eptr[e]:eptr[e + 1]]
-            apexes = (tri[tris].sum(1) - u - v).tolist()
-            if apexes and _is_exception(L, u, v, sides[0], apexes):
-                exceptions.append(e)
-                continue
-        recs = []
-        for sg in sides:
-            rec = [sg, None, None]
-            ku, gu = L.nearest_on_side(u, v, sg, thin=thr)
-            kv, gv = L.nearest_on_side(v, u, -sg, thin=thr)
-            cu = _corner(L, u, v, ku, gu, thr)
-            cv = _corner(L, v, u, kv, gv, thr)
-            if not cu:
-                rec[1] = sg * min(_PI3, (gu if gu is not None else math.pi) / 2.0)
-            if not cv:
-                rec[2] = -sg * min(_PI3, (gv if gv is not None else math.pi) / 2.0)
-            for near, far, k, s_near, off_far in ((u, v, ku, sg, rec[2]), (v, u, kv, -sg, rec[1])):
-                if not (cu if near == u else cv):
-                    continue
-                # the occlusion argument covers the wedge far-near-k only; a far end whose
-                # own open wedge on this side is reflex sees free space beyond it (a robot
-                # in a doorway): the side closes only once that end has no room either
-                if (cu and cv) or not P.corner_wait or not _reflex(L, far, near, -s_near):
-                    marks[(e, sg)] = "convex_corner"
-                else:
-                    corner_wait[(e, sg)] = (far, near, off_far)
-                e2 = int(cx.edge_index(near, k))
-                if not (P.corner_wait and _reflex(L, k, near, s_near)):
-                    marks.setdefault((e2, _canon(near, k, -s_near)), "convex_corner")
-            recs.append(rec)
-        open_sides[e] = recs
-
-    # ---- both-touch rule: ends evidence only (see "evidence" below)
-    ends: dict[tuple[int, int], str] = {}
-    tau = P.tau
-    touch_cache: dict[int, float | None] = {}
-
-    def contact(p: int):
-        if p not in touch_cache:
-            touch_cache[p] = _touch_ok(cx, L, p, tau)
-        return touch_cache[p]
-
-    for e, recs in open_sides.items():
-        u, v = int(cx.edges[e, 0]), int(cx.edges[e, 1])
-        if not (cx.touch[u] and cx.touch[v]):
-            continue
-        ou, ov = contact(u), contact(v)
-        if ou is None or ov is None:
-            continue
-        au, av = wrap(ou - L.bearings(u)[v]), wrap(ov - L.bearings(v)[u])
-        if not (_TOUCH_MARGIN <= abs(au) <= math.pi - _TOUCH_MARGIN
-                and _TOUCH_MARGIN <= abs(av) <= math.pi - _TOUCH_MARGIN):
-            continue
-        for rec in recs:
-            sg = rec[0]
-            if _sgn(au) == sg and _sgn(av) == -sg:
-                ends[(e, sg)] = "both_touch"
-
-    # ---- test-drive failures (spec 3.4(iv)): a drive along phi that touched blocks the
-    # deployments within _FAILED_CONE of phi; the fence sides deploying into it become O
-    # once both ends have no room
-    failed: dict[int, list[float]] = {}
-    if test_drive_failures:
-        for nid, phis in test_drive_failures.items():
-            if int(nid) not in cx:
-                continue
-            p = cx.index_of(int(nid))
-            failed[p] = [float(x) for x in (phis if isinstance(phis, (list, tuple)) else [phis])]
-    def _blocked(p: int, d: float) -> bool:
-        return any(abs(wrap(d - phi)) < _FAILED_CONE for phi in failed.get(p, ()))
-
-    def _deep(p: int, q: int, off):
-        """The second probe of p on the side of edge p-q deploying at ``off``, or None. A
-        robot in no triangle (single file) has the straight-ahead fallback instead."""
-        if off is None or abs(off) < _PI3 - 1e-9 or n_tri_at[p] == 0:
-            return None
-        sg = 1 if off > 0 else -1
-        return wrap(L.bearings(p)[q] + sg * _DEEP) if _reflex(L, p, q, sg) else None
-
-    def _side_closed(p: int, q: int, off) -> bool:
-        """p has no room on this side: its 60-deg direction, and a reflex side's deep probe."""
-        if off is None:
-            return True
-        if not _no_room(p, wrap(L.bearings(p)[q] + off)):
-            return False
-        deep = _deep(p, q, off)
-        return deep is None or _no_room(p, deep)
-
-    def _no_room(p: int, d: float) -> bool:
-        # p cannot deploy along d: a failed test drive's cone, or p rests against a wall
-        # facing that way (its sticky contact)
-        if _blocked(p, d):
-            return True
-        c = contact(p)
-        return c is not None and abs(wrap(d - c)) < _CONTACT_CONE
-
-    if failed:
-        for e, recs in open_sides.items():
-            u, v = int(cx.edges[e, 0]), int(cx.edges[e, 1])
-            if u not in failed and v not in failed:
-                continue
-            for sg, off_u, off_v in recs:
-                # both ends must have no room: one touch (a door jamb, a pillar) says
-                # nothing about the other end's deployment, which goes on (a single end's
-                # failure closing the side left whole rooms behind doors uncovered)
-                if _side_closed(u, v, off_u) and _side_closed(v, u, off_v):
-                    ends.setdefault((e, sg), "test_drive")
-
-    for (e, sg), (far, near, off) in corner_wait.items():
-        if (e, sg) not in marks and _side_closed(far, near, off):
-            marks[(e, sg)] = "convex_corner"
-
-    # ---- evidence (spec 3.4 amendment 2026-11): ends that have no room are not enough. A
-    # side the ends would close becomes O only once every probe of it touched: the end
-    # probes (perpendicular drives from u and from v: a failed drive or a counted wall
-    # contact within _FAILED_CONE of the perpendicular) and the interior probes (by key).
-    fracs = tuple(probe_fracs) if probe_fracs is not None else probe_fractions()
-
-    def _key(k) -> tuple[int, int, int, float]:
-        return (int(k[0]), int(k[1]), int(k[2]), round(float(k[3]), 3))
-
-    pfail = {_key(k) for k in probe_failures}
-    poff = {_key(k): float(o) for k, o in (probe_offsets or {}).items()}
-    tfail = {_key(k): tuple(float(x) for x in t) for k, t in (tilt_failures or {}).items()}
-    pclear = {_key(k) for k in probe_clear}
-    # unreached: (key, end) given up from that end
-    punreach = {(_key(k), int(k[4])) for k in probe_unreachable}
-
-    def _gave_up(key, end: int) -> bool:
-        return (key, end) in punreach
-
-    d0_rv, dtd_rv = P.d0 / P.rv, P.d_td / P.rv
-
+    pos, neg = one_sided(cx)
+    open_sides, exceptions, marks, corner_wait = find_open_sides(cx, L, P, pos, neg)
+    # the ends' rules make a side a candidate (ends); marks close sides
+    room = Room(cx, L, P.tau, test_drive_failures)
+    ends = both_touch(cx, L, open_sides, room)
+    ends = test_drive_rule(cx, open_sides, room, ends)
+    marks = corner_wait_marks(corner_wait, marks, room)
+    ev = probe_evidence(probe_failures, probe_fracs, probe_unreachable, probe_clear,
+                        probe_offsets, tilt_failures)
     if P.corner_probes:
-        # the convex-corner rule (spec 3.3 ii) assumes an obstacle corner sticking out of a
-        # wall; a free-standing box breaks it (clutter map 11 of bench/truth.py certified at
-        # 21.8 % coverage): its marks only make a side a candidate, probed like the others
-        for (e, sg), why in list(marks.items()):
-            if why == "convex_corner":
-                del marks[(e, sg)]
-                if e in open_sides and any(r[0] == sg for r in open_sides[e]):
-                    ends.setdefault((e, sg), "convex_corner")
+        marks, ends = corner_candidates(marks, ends, open_sides)
+    probing, marks = plan_probes(cx, L, P, room, ev, ends, marks)
+    marks = forced_marks(cx, forced_obstacle, marks)
+    fence_edges, K, O, z, deps = resolve_sides(cx, L, open_sides, marks, probing, room)
+    deployments = robot_deployments(cx, L, room, deps, default_bearing)
+    return _fence(cx, fence_edges, K, O, z, deployments, list(open_sides), exceptions)
 
-    probing: dict[tuple[int, int], list[Deployment]] = {}
-    for (e, sg), why in sorted(ends.items()):
-        if (e, sg) in marks:
-            continue
-        u, v = int(cx.edges[e, 0]), int(cx.edges[e, 1])
-        iu, iv = int(ids[u]), int(ids[v])
-        pu = wrap(L.bearings(u)[v] + sg * math.pi / 2.0)
-        pv = wrap(L.bearings(v)[u] - sg * math.pi / 2.0)
-        inner: list[Deployment] = []
-        n_clear = n_open = 0
-        # wall normals the ends rest against, pointing into the open side: each interior
-        # probe that touched is driven along them too (a door in a wall the side cuts
-        # obliquely, e.g. at a corner, is widest along its normal)
-        end_tilts = []
-        for p, perp in ((u, pu), (v, pv)):
-            c = contact(p)
-            if c is not None:
-                t = wrap(c - perp)
-                if needs_tilt(t, P.tilt_min) and abs(t) < math.pi / 2.0 - tau:
-                    end_tilts.append(t)
-        for g in fracs:
-            if g <= 1e-9 or g >= 1.0 - 1e-9:
-                # the ends: their own failed drives / contacts made the side a candidate. The
-                # interior fractions alone pass every opening >= door_min_rv within the span
-                # (gaps L/n <= s, and the end gaps L/n - r < s), so a perpendicular drive at
-                # an end is not asked for (driving them placed 76 robots in covered corners
-                # of the small map, seed 0)
-                continue
-            key = (iu, iv, sg, round(g, 3))
-            tilt = 0.0
-            if key in pfail:
-                # touched: driven again from the same point along each known wall normal
-                # oblique to the probe line (its own touch sector's centre, the ends'
-                # contacts) until each of those touched too
-                off = poff.get(key)
-                todo = _tilts_todo(([off] if needs_tilt(off, P.tilt_min) else []) + end_tilts,
-                                   tfail.get(key, ()))
-                if not todo:
-                    continue                  # touched along every one: evidence of a wall
-                tilt = todo[0]
-            if key in pclear:
-                n_clear += 1                  # found room (its robot stays): done, not evidence
-                continue
-            n_open += 1
-            # the tilted drive's component along the edge, toward v (sigma +1: open side CCW
-            # of u -> v, so a CCW tilt leans back toward u)
-            depth = probe_depth_rv(g, d0_rv, dtd_rv, lean=-sg * math.sin(tilt))
-            bu, bv = wrap(pu + tilt), wrap(pv + tilt)
-            # either end can drive it, the nearer one first; an end whose approach leg kept
-            # failing (it clips a jamb) has given up: the other end tries it
-            a = None if _gave_up(key, iu) else Deployment(
-                iu, bu, (iu, iv), sg, wrap(sg * math.pi / 2.0 + tilt), L.clearance(u, bu), "probe",
-                round(g, 3), depth, tilt)
-            b = None if _gave_up(key, iv) else Deployment(
-                iv, bv, (iu, iv), sg, wrap(-sg * math.pi / 2.0 + tilt), L.clearance(v, bv),
-                "probe", round(1.0 - g, 3), depth, tilt)
-            inner.extend(d for d in ((a, b) if g <= 0.5 else (b, a)) if d is not None)
-        if inner:
-            probing[(e, sg)] = sorted(inner, key=lambda d: d.via_frac)
-        elif n_open == 0 and n_clear == 0:
-            marks[(e, sg)] = "probes"         # every probe touched: closed on evidence
-        elif n_open == 0 and P.clear_infers:
-            marks[(e, sg)] = "probe_clear"    # inferred: some probe found room
-        elif n_clear == 0:
-            # every probe touched or was unreached from both ends (its approach leg clips a
-            # jamb from either side): closed, but as an INFERENCE, reported with the
-            # certificate ('probe_unreachable'). Leaving such sides open stopped real runs
-            # uncertified at 100% coverage (the 0.8 m door map: "no feasible push")
-            marks[(e, sg)] = "probe_unreachable"
-        elif P.clear_infers:
-            # nothing left to try: some probe found room (its robot stands beyond the side
-            # yet forms no triangle with it: something between them blocks the view) and the
-            # others' approach legs clip an obstacle on the edge from both ends. Closed as
-            # the inference 'probe_unreachable', like either case alone. Left open, 95 of
-            # bench/truth.py's 500 maps (seed 0) ended stuck uncertified, every one of them
-            # fully covered by the oracle's raster
-            marks[(e, sg)] = "probe_unreachable"
-        else:
-            # clear_infers off: no evidence closes it and nothing is left to try. Frontier
-            # with no deployment: the run ends uncertified (honest), never a closure
-            probing[(e, sg)] = []
 
-    for pair in forced_obstacle:
-        a, b = (int(x) for x in pair)
-        if a in cx and b in cx:
-            e2 = int(cx.edge_index(cx.index_of(a), cx.index_of(b)))
-            if e2 >= 0:
-                for sg in (1, -1):
-                    marks[(e2, sg)] = "forced"
-
-    # ---- assemble
-    fence_edges: list[FenceEdge] = []
-    K: list[int] = []
-    O: list[int] = []
-    z: list[int] = []
-    deps: dict[int, list[Deployment]] = {}
-    single = (n_tri_at == 0) & (cx.degree > 0)
-    for e, recs in open_sides.items():
-        u, v = int(cx.edges[e, 0]), int(cx.edges[e, 1])
-        Bu, Bv = L.bearings(u), L.bearings(v)
-        sides = []
-        for sg, off_u, off_v in recs:
-            why = marks.get((e, sg))
-            if why is not None:
-                sides.append(FenceSide(sg, "obstacle", why))
-                continue
-            if (e, sg) in probing:
-                sides.append(FenceSide(sg, "frontier", "probing"))
-                for d in probing[(e, sg)]:
-                    deps.setdefault(cx.index_of(d.vertex), []).append(d)
-                continue
-            # an end that sees a convex corner on this side (corner_wait) does not deploy
-            du = None if off_u is None else wrap(Bu[v] + off_u)
-            dv = None if off_v is None else wrap(Bv[u] + off_v)
-            sides.append(FenceSide(sg, "frontier", "open", du, dv, off_u, off_v))
-            edge_ids = (int(ids[u]), int(ids[v]))
-            for p, q, d, off in ((u, v, du, off_u), (v, u, dv, off_v)):
-                if off is None:
-                    continue
-                deps.setdefault(p, []).append(
-                    Deployment(int(ids[p]), d, edge_ids, sg, off, L.clearance(p, d), "edge"))
-                deep = _deep(p, q, off) if _blocked(p, d) else None
-                if deep is not None:
-                    deps[p].append(Deployment(int(ids[p]), deep, edge_ids, sg,
-                                              wrap(deep - L.bearings(p)[q]),
-                                              L.clearance(p, deep), "edge"))
-        fe = FenceEdge(int(ids[u]), int(ids[v]), e, tuple(sides))
-        fence_edges.append(fe)
-        if fe.is_frontier:
-            K.append(e)
-        if fe.is_obstacle:
-            O.append(e)
-        if len(recs) == 1:
-            z.append(e)
-
-    # single-file robots (no triangle, spec 3.3): away from the circular mean of the
-    # neighbours -- the end of a chain; a robot between two opposite neighbours (resultant
-    # < 0.5) is inside the chain and has no single-file direction
+def _fence(cx: Complex, fence_edges: list[FenceEdge], K: list[int], O: list[int], z: list[int],
+           deployments: Mapping[int, tuple[Deployment, ...]], open_edges: list[int],
+           exceptions: list[int]) -> Fence:
+    """The Fence: edge id arrays sorted, z_raw the one-sided edges z, z_repair the T-join
+    that makes it a cycle (:func:`_repair_cycle`, cheap inside the band of the open and
+    exception edges' ends), z = z_raw XOR z_repair, and the vertex sets."""
+    ids = cx.ids
     K_arr = np.array(sorted(K), dtype=_I64)
-    # Every direction of the open wedge is offered (spec 3.4 amendment: a robot with one
-    # or no neighbour probes every free direction before it gives up): away from the
-    # neighbours, then 60, 120 deg either side, each at least _SINGLE_CLEAR from every
-    # neighbour. A failed drive blocks 30 deg either side, so each touch removes one.
-    for p in np.nonzero(single)[0].tolist():
-        mean, res = circular_mean(L.bearings(p).values())
-        if res < 0.5:
-            continue
-        for k in (0, 1, -1, 2, -2):
-            d = wrap(mean + math.pi + k * _PI3)
-            c = L.clearance(p, d)
-            if k == 0 or c >= _SINGLE_CLEAR:
-                deps.setdefault(p, []).append(
-                    Deployment(int(ids[p]), d, None, 0, 0.0, c, "single_file"))
-    # a robot with no neighbour: six directions 60 deg apart from its default bearing
-    for p in np.nonzero(cx.degree == 0)[0].tolist():
-        if isinstance(default_bearing, Mapping):
-            d0_ = wrap(float(default_bearing.get(int(ids[p]), 0.0)))
-        else:
-            d0_ = wrap(float(default_bearing))
-        for k in range(6):
-            deps.setdefault(p, []).append(Deployment(int(ids[p]), wrap(d0_ + k * _PI3), None, 0,
-                                                     0.0, math.pi, "isolated"))
-    # test-drive failures also drop deployments pointing into the failed gap
-    for p in failed:
-        if p in deps:
-            keep = [dp for dp in deps[p] if dp.kind == "probe" or not _blocked(p, dp.bearing)]
-            if keep:
-                deps[p] = keep
-            else:
-                del deps[p]
-
-    # a robot with a frontier edge deploys off the edge (60 deg, triangles); the single-file
-    # direction is its fallback once those are gone (a corridor too narrow for triangles
-    # makes the edge deployments fail their test drives)
-    for p, lst in deps.items():
-        if any(d.kind == "edge" for d in lst):
-            deps[p] = [d for d in lst if d.kind != "single_file"]
-    deployments = {
-        int(ids[p]): tuple(sorted(lst, key=lambda d: (-d.clearance, d.edge or (0, 0), d.sigma)))
-        for p, lst in sorted(deps.items())
-    }
     fence_edges.sort(key=lambda f: f.index)
     z_raw = np.array(sorted(z), dtype=_I64)
     band = np.zeros(cx.n, dtype=bool)
-    if open_sides or exceptions:
-        band[cx.edges[np.array(list(open_sides) + exceptions, dtype=_I64)].ravel()] = True
+    if open_edges or exceptions:
+        band[cx.edges[np.array(open_edges + exceptions, dtype=_I64)].ravel()] = True
     repair = _repair_cycle(cx, z_raw, band) if z_raw.size else np.zeros(0, _I64)
-    zmask = np.zeros(E, dtype=bool)
+    zmask = np.zeros(cx.n_edges, dtype=bool)
     zmask[z_raw] = True
     zmask[repair] ^= True
     O_arr = np.array(sorted(O), dtype=_I64)

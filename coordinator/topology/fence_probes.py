@@ -1,0 +1,229 @@
+"""Evidence before a fence side closes (spec 3.4 amendment 2026-11): the probes of the
+candidate sides, a stage of :func:`coordinator.topology.fence.detect_fence`.
+
+Ends that have no room are not enough. A side the ends would close (a candidate, from
+:mod:`coordinator.topology.fence_sides`) becomes O only once every probe of it touched:
+the end probes (perpendicular drives from u and from v: a failed drive or a counted wall
+contact within _FAILED_CONE of the perpendicular) and the interior probes, by key
+(u, v, sigma, fraction from u; node ids u < v, the fraction rounded to 3 decimals). A
+touched probe is driven again TILTED along each wall normal known at the side
+(coordinator.topology.evidence). Until then the side stays frontier ('probing') and
+offers its missing probes as deployments (kind 'probe'); with none left it closes on
+evidence ('probes') or as an inference ('probe_clear', 'probe_unreachable'), or stays
+frontier with no deployment.
+
+Units: bearings, tilts and offsets in rad (body frame of the robot named; a tilt from
+the probe's perpendicular, counter-clockwise), depths in rv. Marks map (e, sigma) (edge
+id, canonical side) to a reason string; probing maps it to the side's probe
+deployments, by via_frac.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ground.angles import wrap
+from .complex import Complex
+from .evidence import TILT_MATCH, needs_tilt, probe_depth_rv, probe_fractions
+from .fence_local import _Local
+from .fence_sides import Marks, Room, Sides
+from .fence_types import Deployment
+from .params import TopologyParams
+
+__all__: list[str] = []
+
+# TopologyParams.corner_probes: convex-corner marks (spec 3.3 ii) make a side a probing
+# candidate rather than closing it (True), or close it as inferred 'convex_corner' (False).
+# Off by default: bench/truth.py seed 0 maps 0-12 with it on (and clear_infers on) ran
+# clutter maps 10, 11, 12 to the robot cap (99, 81, 80 robots; clear probes off box corners
+# place robots that form new corners), so tests/test_truth.py cannot pass either way; map
+# 11 (a free-standing box) is then still a false certificate by this rule (issue 21).
+# TopologyParams.clear_infers: a side whose probes are all done, some clear (room found,
+# its robot stayed) while the side is still one-sided: False leaves it frontier with no
+# deployment (uncertified); True closes it as inferred ('probe_clear'). bench/truth.py seed
+# 0 (corner probes off): False, maps 0-39: 14 fixed (all certified), 26 stuck (22 of them
+# >= 99.9 % covered: unreached probes from both ends, or a clear probe), 0 livelock, 0 cap,
+# 46.2 robots; True, maps 0-36: 21 certified, 16 stuck, no false certificate beyond False's
+# (#11 convex corner, #18 a 0.30 rv door). On by default: with it off, corridor_doors (seed
+# 0, in-process) stopped uncertified after 114 cycles with one such side left ("no
+# feasible push"). The closure is reported as inferred.
+
+
+def _tilts_todo(needed, done) -> list[float]:
+    """The tilts (rad) of ``needed``, merged within evidence.TILT_MATCH, that no touched
+    tilt in ``done`` stands for."""
+    todo: list[float] = []
+    for t in needed:
+        if any(abs(wrap(t - d)) <= TILT_MATCH for d in (*done, *todo)):
+            continue
+        todo.append(float(t))
+    return todo
+
+
+def _key(k) -> tuple[int, int, int, float]:
+    return (int(k[0]), int(k[1]), int(k[2]), round(float(k[3]), 3))
+
+
+@dataclass(frozen=True)
+class ProbeEvidence:
+    """The probe outcomes given to detect_fence, by normalised key.
+
+    fracs: fractions of the edge where probes go. failed: keys of interior probes that
+    touched. offsets: key -> touch sector centre minus the direction driven (rad).
+    tilt_failed: key -> tilts (rad) of its tilted probes that touched. clear: keys of
+    probes that found room. unreached: (key, end node id) given up from that end.
+    """
+
+    fracs: tuple
+    failed: frozenset
+    offsets: dict
+    tilt_failed: dict
+    clear: frozenset
+    unreached: frozenset
+
+    def gave_up(self, key, end: int) -> bool:
+        return (key, end) in self.unreached
+
+
+def probe_evidence(probe_failures=(), probe_fracs=None, probe_unreachable=(), probe_clear=(),
+                   probe_offsets=None, tilt_failures=()) -> ProbeEvidence:
+    """detect_fence's probe keywords (same names and meaning) as a :class:`ProbeEvidence`;
+    the fractions default to ``evidence.probe_fractions()``."""
+    fracs = tuple(probe_fracs) if probe_fracs is not None else probe_fractions()
+    pfail = {_key(k) for k in probe_failures}
+    poff = {_key(k): float(o) for k, o in (probe_offsets or {}).items()}
+    tfail = {_key(k): tuple(float(x) for x in t) for k, t in (tilt_failures or {}).items()}
+    pclear = {_key(k) for k in probe_clear}
+    # unreached: (key, end) given up from that end
+    punreach = {(_key(k), int(k[4])) for k in probe_unreachable}
+    return ProbeEvidence(fracs, frozenset(pfail), poff, tfail, frozenset(pclear), frozenset(punreach))
+
+
+def corner_candidates(marks: Marks, ends: Marks, open_sides: Sides) -> tuple[Marks, Marks]:
+    """(marks, ends) with TopologyParams.corner_probes: the convex-corner rule (spec 3.3
+    ii) assumes an obstacle corner sticking out of a wall; a free-standing box breaks it
+    (clutter map 11 of bench/truth.py certified at 21.8 % coverage): its marks only make a
+    side a candidate ('convex_corner' in ends), probed like the others."""
+    marks, ends = dict(marks), dict(ends)
+    for (e, sg), why in list(marks.items()):
+        if why == "convex_corner":
+            del marks[(e, sg)]
+            if e in open_sides and any(r[0] == sg for r in open_sides[e]):
+                ends.setdefault((e, sg), "convex_corner")
+    return marks, ends
+
+
+def _side_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: ProbeEvidence,
+                 e: int, sg: int) -> tuple[list[Deployment], int, int]:
+    """(probe deployments still to drive, n_open, n_clear) of side sg of edge e: n_open
+    interior probes not done, n_clear found room."""
+    ids = cx.ids
+    d0_rv, dtd_rv = P.d0 / P.rv, P.d_td / P.rv
+    u, v = int(cx.edges[e, 0]), int(cx.edges[e, 1])
+    iu, iv = int(ids[u]), int(ids[v])
+    pu = wrap(L.bearings(u)[v] + sg * math.pi / 2.0)
+    pv = wrap(L.bearings(v)[u] - sg * math.pi / 2.0)
+    inner: list[Deployment] = []
+    n_clear = n_open = 0
+    # wall normals the ends rest against, pointing into the open side: each interior
+    # probe that touched is driven along them too (a door in a wall the side cuts
+    # obliquely, e.g. at a corner, is widest along its normal)
+    end_tilts = []
+    for p, perp in ((u, pu), (v, pv)):
+        c = room.contact(p)
+        if c is not None:
+            t = wrap(c - perp)
+            if needs_tilt(t, P.tilt_min) and abs(t) < math.pi / 2.0 - P.tau:
+                end_tilts.append(t)
+    for g in ev.fracs:
+        if g <= 1e-9 or g >= 1.0 - 1e-9:
+            # the ends: their own failed drives / contacts made the side a candidate. The
+            # interior fractions alone pass every opening >= door_min_rv within the span
+            # (gaps L/n <= s, and the end gaps L/n - r < s), so a perpendicular drive at
+            # an end is not asked for (driving them placed 76 robots in covered corners
+            # of the small map, seed 0)
+            continue
+        key = (iu, iv, sg, round(g, 3))
+        tilt = 0.0
+        if key in ev.failed:
+            # touched: driven again from the same point along each known wall normal
+            # oblique to the probe line (its own touch sector's centre, the ends'
+            # contacts) until each of those touched too
+            off = ev.offsets.get(key)
+            todo = _tilts_todo(([off] if needs_tilt(off, P.tilt_min) else []) + end_tilts,
+                               ev.tilt_failed.get(key, ()))
+            if not todo:
+                continue                  # touched along every one: evidence of a wall
+            tilt = todo[0]
+        if key in ev.clear:
+            n_clear += 1                  # found room (its robot stays): done, not evidence
+            continue
+        n_open += 1
+        # the tilted drive's component along the edge, toward v (sigma +1: open side CCW
+        # of u -> v, so a CCW tilt leans back toward u)
+        depth = probe_depth_rv(g, d0_rv, dtd_rv, lean=-sg * math.sin(tilt))
+        bu, bv = wrap(pu + tilt), wrap(pv + tilt)
+        # either end can drive it, the nearer one first; an end whose approach leg kept
+        # failing (it clips a jamb) has given up: the other end tries it
+        a = None if ev.gave_up(key, iu) else Deployment(
+            iu, bu, (iu, iv), sg, wrap(sg * math.pi / 2.0 + tilt), L.clearance(u, bu), "probe",
+            round(g, 3), depth, tilt)
+        b = None if ev.gave_up(key, iv) else Deployment(
+            iv, bv, (iu, iv), sg, wrap(-sg * math.pi / 2.0 + tilt), L.clearance(v, bv),
+            "probe", round(1.0 - g, 3), depth, tilt)
+        inner.extend(d for d in ((a, b) if g <= 0.5 else (b, a)) if d is not None)
+    return inner, n_open, n_clear
+
+
+def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: ProbeEvidence,
+                ends: Marks, marks: Marks) -> tuple[dict[tuple[int, int], list[Deployment]], Marks]:
+    """(probing, marks) for the candidate sides ``ends`` not already marked, in (e,
+    sigma) order: a side with probes left is probing (its deployments by via_frac); one
+    with none left is marked closed ('probes', 'probe_clear', 'probe_unreachable') or,
+    with ``TopologyParams.clear_infers`` off and some probe clear, probing with no
+    deployment (the run ends uncertified)."""
+    marks = dict(marks)
+    probing: dict[tuple[int, int], list[Deployment]] = {}
+    for e, sg in sorted(ends):
+        if (e, sg) in marks:
+            continue
+        inner, n_open, n_clear = _side_probes(cx, L, P, room, ev, e, sg)
+        if inner:
+            probing[(e, sg)] = sorted(inner, key=lambda d: d.via_frac)
+        elif n_open == 0 and n_clear == 0:
+            marks[(e, sg)] = "probes"         # every probe touched: closed on evidence
+        elif n_open == 0 and P.clear_infers:
+            marks[(e, sg)] = "probe_clear"    # inferred: some probe found room
+        elif n_clear == 0:
+            # every probe touched or was unreached from both ends (its approach leg clips a
+            # jamb from either side): closed, but as an INFERENCE, reported with the
+            # certificate ('probe_unreachable'). Leaving such sides open stopped real runs
+            # uncertified at 100% coverage (the 0.8 m door map: "no feasible push")
+            marks[(e, sg)] = "probe_unreachable"
+        elif P.clear_infers:
+            # nothing left to try: some probe found room (its robot stands beyond the side
+            # yet forms no triangle with it: something between them blocks the view) and the
+            # others' approach legs clip an obstacle on the edge from both ends. Closed as
+            # the inference 'probe_unreachable', like either case alone. Left open, 95 of
+            # bench/truth.py's 500 maps (seed 0) ended stuck uncertified, every one of them
+            # fully covered by the oracle's raster
+            marks[(e, sg)] = "probe_unreachable"
+        else:
+            # clear_infers off: no evidence closes it and nothing is left to try. Frontier
+            # with no deployment: the run ends uncertified (honest), never a closure
+            probing[(e, sg)] = []
+    return probing, marks
+
+
+def forced_marks(cx: Complex, forced_obstacle, marks: Marks) -> Marks:
+    """``marks`` with both sides of each ``forced_obstacle`` edge (node-id pairs; pairs
+    not in the complex are ignored) set to 'forced'."""
+    marks = dict(marks)
+    for pair in forced_obstacle:
+        a, b = (int(x) for x in pair)
+        if a in cx and b in cx:
+            e2 = int(cx.edge_index(cx.index_of(a), cx.index_of(b)))
+            if e2 >= 0:
+                for sg in (1, -1):
+                    marks[(e2, sg)] = "forced"
+    return marks

@@ -1,0 +1,141 @@
+"""The fence's data types: what :func:`coordinator.topology.fence.detect_fence` returns.
+
+``Deployment`` (where a robot would send a new robot), ``FenceSide`` (one open side of an
+edge and how it got its kind), ``FenceEdge`` (an edge of K or O with its sides) and
+``Fence`` (the whole result). Node ids are the robots' ids (``Complex.ids``), edge ids
+index ``Complex.edges``; bearings and offsets are rad in the body frame of the robot
+named; sides sigma are +1/-1 in the canonical orientation of fence.py's docstring.
+Arrays of edge ids are int64 (k,), sorted.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import numpy as np
+
+__all__ = ["Deployment", "FenceSide", "FenceEdge", "Fence"]
+
+
+@dataclass(frozen=True)
+class Deployment:
+    """Where a robot at ``vertex`` would send a new robot.
+
+    bearing: direction (rad) in the body frame of the robot at ``vertex``.
+    edge: fence edge (u, v) node ids with u < v, or None (single file / isolated robot).
+    sigma: canonical open side of ``edge`` (+1/-1), 0 when edge is None.
+    offset: theta_new, the signed angle (rad) from the edge direction to ``bearing``.
+    clearance: smallest |angle| (rad) between ``bearing`` and any neighbour bearing
+      (pi when the robot has no neighbour).
+    kind: 'edge', 'single_file', 'isolated' or 'probe'.
+    via_frac: probes only: the drive first goes from ``vertex`` to the point at this
+      fraction of the way toward the edge's other end (0: no approach leg, a plain
+      perpendicular test drive from ``vertex``), then along ``bearing``, perpendicular to
+      the edge into the open side ``sigma``.
+    depth_rv: how far (x rv) the drive along ``bearing`` goes; 0 for non-probes (the
+      configured test-drive length or the planner's placement).
+    tilt: probes only: 0 for a probe perpendicular to the edge; for a TILTED probe (its
+      perpendicular probe touched, coordinator.topology.evidence) the CCW angle (rad) from
+      the perpendicular to ``bearing``: the touch sector's centre, near the wall's normal.
+    A geometric harness executes a probe as: x = p + via_frac * (q - p), then drive from x
+    along the perpendicular for depth_rv * rv; a touch within the deployer's
+    wall_keep_rv sends the robot home (evidence of a wall), no touch leaves it there.
+    """
+
+    vertex: int
+    bearing: float
+    edge: tuple[int, int] | None
+    sigma: int
+    offset: float
+    clearance: float
+    kind: str
+    via_frac: float = 0.0
+    depth_rv: float = 0.0
+    tilt: float = 0.0
+
+
+@dataclass(frozen=True)
+class FenceSide:
+    """One open side of a fence edge.
+
+    kind: 'frontier' or 'obstacle'. reason (also ``why``): for obstacle sides 'probes'
+    (evidence: every probe of the side touched), or an inference: 'convex_corner' (the
+    occlusion rule of spec 3.3, pi/3 - 2 beta) or 'forced' (carried over by the caller); for
+    frontier sides 'open', or 'probing' (its ends say "no room", some probe is still
+    untried: only probes are offered on it). deploy_u / deploy_v: deployment bearings (rad)
+    in the body frames of u and v (None for obstacle and probing sides). offset_u / offset_v:
+    theta_new at u and at v.
+    """
+
+    sigma: int
+    kind: str
+    reason: str
+    deploy_u: float | None = None
+    deploy_v: float | None = None
+    offset_u: float | None = None
+    offset_v: float | None = None
+
+    @property
+    def why(self) -> str:
+        """How the side got its kind (the same as ``reason``)."""
+        return self.reason
+
+    @property
+    def inferred(self) -> bool:
+        """An obstacle side closed by inference, not by evidence (probes)."""
+        return self.kind == "obstacle" and self.reason != "probes"
+
+
+@dataclass(frozen=True)
+class FenceEdge:
+    """A fence edge: node ids u < v, its edge id in the complex, and its open sides."""
+
+    u: int
+    v: int
+    index: int
+    sides: tuple[FenceSide, ...]
+
+    @property
+    def one_sided(self) -> bool:
+        return len(self.sides) == 1
+
+    @property
+    def is_frontier(self) -> bool:
+        return any(s.kind == "frontier" for s in self.sides)
+
+    @property
+    def is_obstacle(self) -> bool:
+        return any(s.kind == "obstacle" for s in self.sides)
+
+
+@dataclass(frozen=True, eq=False)
+class Fence:
+    """Result of :func:`detect_fence`.
+
+    edges: every fence edge (in K or O), by edge id order.
+    frontier / obstacle / exceptions / z: edge ids (into ``Complex.edges``) of K, O,
+      the exception set E, and the one-sided fence edges z (the certificate target).
+    deployments: node id -> deployments available at that robot, best clearance first.
+    frontier_vertices / obstacle_vertices / fence_vertices: node ids.
+    inferred: (edge id, why) for every obstacle side closed by inference rather than by
+      probes ('convex_corner', 'forced', 'probe_clear'), by edge id.
+    """
+
+    edges: tuple[FenceEdge, ...]
+    frontier: np.ndarray
+    obstacle: np.ndarray
+    exceptions: np.ndarray
+    z: np.ndarray
+    z_raw: np.ndarray
+    z_repair: np.ndarray
+    deployments: Mapping[int, tuple[Deployment, ...]]
+    frontier_vertices: frozenset[int]
+    obstacle_vertices: frozenset[int]
+    fence_vertices: frozenset[int]
+    by_index: Mapping[int, FenceEdge] = field(default_factory=dict)
+    inferred: tuple[tuple[int, str], ...] = ()
+
+    @property
+    def done(self) -> bool:
+        """True when there is no frontier left (K empty and no deploying robot)."""
+        return not self.deployments
