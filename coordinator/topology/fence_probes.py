@@ -3,8 +3,9 @@ candidate sides, a stage of :func:`coordinator.topology.fence.detect_fence`.
 
 Ends that have no room are not enough. A side the ends would close (a candidate, from
 :mod:`coordinator.topology.fence_sides`) becomes O only once every probe of it touched:
-the end probes (perpendicular drives from u and from v: a failed drive or a counted wall
-contact within _FAILED_CONE of the perpendicular) and the interior probes, by key
+at the ends, the evidence u and v already have (a failed drive or a counted wall contact
+within _FAILED_CONE of the perpendicular; the ends are not driven again), and the interior
+probes, by key
 (u, v, sigma, fraction from u; node ids u < v, the fraction rounded to 3 decimals). A
 touched probe is driven again TILTED along each wall normal known at the side
 (coordinator.topology.evidence). Until then the side stays frontier ('probing') and

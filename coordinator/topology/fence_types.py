@@ -113,8 +113,12 @@ class Fence:
     """Result of :func:`detect_fence`.
 
     edges: every fence edge (in K or O), by edge id order.
-    frontier / obstacle / exceptions / z: edge ids (into ``Complex.edges``) of K, O,
-      the exception set E, and the one-sided fence edges z (the certificate target).
+    frontier / obstacle / exceptions: edge ids (into ``Complex.edges``) of K, O and the
+      exception set E.
+    z_raw: edge ids of the one-sided fence edges: the certificate's target
+      (coordinator.topology.certificate).
+    z_repair: edge ids of a shortest T-join pairing z_raw's odd vertices (the closure
+      certify tries first); z = z_raw XOR z_repair, a cycle (for figures and viewers).
     deployments: node id -> deployments available at that robot, best clearance first.
     frontier_vertices / obstacle_vertices / fence_vertices: node ids.
     inferred: (edge id, why) for every obstacle side closed by inference rather than by
