@@ -98,20 +98,6 @@ def naive_sense(pos, heading, walls, rv, radius, skin, n_touch):
     return out, touch
 
 
-def split(batch, ids):
-    """What the node does per tick before encoding: per-robot Python lists."""
-    ida = np.asarray(ids)
-    tgt = ida[batch.tgt].tolist()
-    brg = batch.bearing.tolist()
-    back = batch.back.tolist()
-    tb = batch.touch_bearing.tolist()
-    tr = batch.touch_is_robot.tolist()
-    co = batch.cam_off.tolist()
-    to = batch.touch_off.tolist()
-    return [(tgt[co[k]:co[k + 1]], brg[co[k]:co[k + 1]], back[co[k]:co[k + 1]],
-             tb[to[k]:to[k + 1]], tr[to[k]:to[k + 1]]) for k in range(len(ids))]
-
-
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -155,7 +141,7 @@ def main(argv=None) -> int:
         return t1 - t0, t2 - t1
 
     def fast(ids, pos, th):
-        split(sens.sense(pos, th), ids)
+        sens.sense(pos, th).lists(ids)   # what the node does per tick before encoding
 
     def naive(ids, pos, th):
         naive_sense(pos, th, wm.walls, cfg.rv, cfg.robots.radius, cfg.sensing.touch_skin,

@@ -193,8 +193,7 @@ class SimLoop:
         ids, pos, th = self.physics.state()
         cmds = np.zeros((len(ids), 3))
         if ids and self.tick % self.sense_every == 0:
-            b = self.sensors.sense(pos, th)
-            ida = np.asarray(ids, np.int64)
+            per = self.sensors.sense(pos, th).lists(ids)
             every = self.status_every or self.agent_params.status_every
             for k, rid in enumerate(ids):
                 beh = self.agents.get(rid)
@@ -207,10 +206,7 @@ class SimLoop:
                     self._joined.add(rid)
                 for task in self._tasks.pop(rid, ()):
                     beh.on_task(task)
-                r = b.robot(k)
-                s = Sense(robot=rid, tick=self.tick, t=self.t, ids=ida[r["tgt"]].tolist(),
-                          bearings=r["bearings"].tolist(), back_bearings=r["back"].tolist(),
-                          touch=r["touch"].tolist(), touch_robot=r["touch_robot"].tolist())
+                s = Sense(robot=rid, tick=self.tick, t=self.t, **per[k])
                 c = beh.step(s)
                 cmds[k] = (c.vx, c.vy, c.wz)
                 self.own_ticks[rid] += 1

@@ -299,13 +299,23 @@ class WorldNode:
                 self.coord_in = True
                 self.log.info("tick %d: the coordinator is back in the barrier", self.tick)
 
-    def _on_cmd(self, key: str, payload: bytes) -> None:
+    def _robot_msg(self, key: str, payload: bytes, cls):
+        """(robot id, message) of a per-robot key's payload, or None (counted as dropped)
+        when it does not decode or its robot field is not the key's."""
         rid = self.keys.robot_id(key)
-        m = self.rx.decode(key, payload, CmdVel)
+        m = self.rx.decode(key, payload, cls)
         if m is None or rid is None:
-            return
+            return None
         if m.robot != rid:
-            return self._drop(key, "robot field differs from key", f"robot={m.robot}")
+            self._drop(key, "robot field differs from key", f"robot={m.robot}")
+            return None
+        return rid, m
+
+    def _on_cmd(self, key: str, payload: bytes) -> None:
+        got = self._robot_msg(key, payload, CmdVel)
+        if got is None:
+            return
+        rid, m = got
         if not self.physics.has(rid):
             return self._drop(key, "unknown robot", f"no body {rid}")
         if self.physics.is_live(rid):
@@ -333,12 +343,10 @@ class WorldNode:
                     self._t_answered = time.monotonic()
 
     def _on_twin(self, key: str, payload: bytes) -> None:
-        rid = self.keys.robot_id(key)
-        m = self.rx.decode(key, payload, TwinCmd)
-        if m is None or rid is None:
+        got = self._robot_msg(key, payload, TwinCmd)
+        if got is None:
             return
-        if m.robot != rid:
-            return self._drop(key, "robot field differs from key", f"robot={m.robot}")
+        rid, m = got
         if not self.physics.has(rid) or not self.physics.is_live(rid):
             return self._drop(key, "twin_cmd for a robot that is not a live twin", str(rid))
         if m.teleport:
@@ -505,24 +513,13 @@ class WorldNode:
         self.last_send = now
 
     def _publish_sense(self, ids, pos, th, t) -> None:
-        b = self.sensors.sense(pos, th)
-        ida = np.asarray(ids, np.int64)
-        tgt = ida[b.tgt].tolist()
-        brg = b.bearing.tolist()
-        back = b.back.tolist()
-        tb = b.touch_bearing.tolist()
-        tr = b.touch_is_robot.tolist()
-        co = b.cam_off.tolist()
-        to = b.touch_off.tolist()
+        per = self.sensors.sense(pos, th).lists(ids)
         self.last_sense = {}
         barrier = self.coord_in
         for k, rid in enumerate(ids):
             if self.joins.get(rid, -1) > self.tick:
                 continue  # its agent takes part from its join tick on
-            a, e = co[k], co[k + 1]
-            c, d = to[k], to[k + 1]
-            data = Sense(robot=rid, tick=self.tick, t=t, ids=tgt[a:e], bearings=brg[a:e],
-                         back_bearings=back[a:e], touch=tb[c:d], touch_robot=tr[c:d],
+            data = Sense(robot=rid, tick=self.tick, t=t, **per[k],
                          task_id=self.task_last.get(rid, 0) if barrier else -1).encode()
             self.last_sense[rid] = data
             self.pubs[rid][0].put(data)
