@@ -44,7 +44,9 @@ def bench_config(seed: int) -> dict:
         elif k % 3 == 1:
             obstacles.append({"type": "circle", "center": [x, y], "radius": rng.uniform(0.4, 1.0)})
         else:
-            a = np.sort(rng.uniform(0, 2 * math.pi, 6))
+            # star-shaped with every angular gap < pi: a simple polygon, which the map
+            # check requires (sorted uniform angles could leave a gap > pi and cross)
+            a = 2 * math.pi * np.arange(6) / 6 + rng.uniform(-0.4, 0.4, 6)
             r = rng.uniform(0.5, 1.2, 6)
             obstacles.append({"type": "polygon", "points": [[x + r[i] * math.cos(a[i]),
                                                              y + r[i] * math.sin(a[i])]
