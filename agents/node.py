@@ -35,7 +35,7 @@ from bus.node import ready, run_node
 from bus.session import (Mailbox, Receiver, Shutdown, add_zenoh_args, publisher, query_world_info,
                          undeclare)
 
-from .behaviours import Behaviour
+from .core import AgentCore
 from .params import ROBOT_KINDS, AgentParams, ParamError, from_toml_text, parse_override
 
 HEARTBEAT_S = 1.0
@@ -114,25 +114,22 @@ def resolve_params(args, session, keys: Keys, stop: Shutdown,
 
 
 class AgentNode:
-    """The process loop around a :class:`Behaviour`: decode, step, publish."""
+    """The process loop around an :class:`agents.core.AgentCore`: decode, step, publish."""
 
     def __init__(self, session, keys: Keys, rid: int, params: AgentParams, live: bool,
                  log: logging.Logger, lockstep: bool = False):
         self.session, self.keys, self.rid, self.p, self.live, self.log = (
             session, keys, rid, params, live, log)
         self.lockstep = lockstep
-        self.beh = Behaviour(params, rid)
+        self.core = AgentCore(params, rid, live=live, log=log)
+        self.beh = self.core.beh
         self.rx = Receiver(log)
         self.mailbox = Mailbox()
         self.k_sense, self.k_task, self.k_odom = keys.sense(rid), keys.task(rid), keys.odom(rid)
         self.subs = []
         self.token = None
-        self.seq = 0
-        self.ticks = 0
         self.skipped = 0
-        self.errors = 0
         self.last_pose: list[float] = []
-        self.last_t = 0.0
         self.last_status = 0.0
         self.last_tick: int | None = None
         self.last_cmd: bytes | None = None
@@ -173,10 +170,10 @@ class AgentNode:
             self.log.warning("dropping a message on %s: %s (further ones are counted)", key, why)
 
     def publish_status(self, tick: int = -1) -> None:
-        self.seq += 1
-        st = self.beh.status_message(self.seq, self.last_t, tick, self.live, self.last_pose)
+        self._put_status(self.core.status(tick, self.last_pose))
+
+    def _put_status(self, st) -> None:
         self.pub_status.put(st.encode())
-        self.beh.changed = False
         self.last_status = time.monotonic()
 
     def handle(self, items) -> None:
@@ -269,20 +266,12 @@ class AgentNode:
             return
         if not self._tasks_for(sense):
             return
-        try:
-            cmd = self.beh.step(sense)
-        except Exception:  # a bug must not take the robot down: stop and say so once
-            self.errors += 1
-            if self.errors == 1:
-                self.log.exception("behaviour error at tick %d (robot stops)", sense.tick)
-            cmd = None
-        self.ticks += 1
-        self.last_t = sense.t
-        if self.beh.changed or self.ticks % self.p.status_every == 0:
-            self.publish_status(sense.tick)
+        cmd, st = self.core.step(sense, self.last_pose)
+        if st is not None:
+            self._put_status(st)
         # after the tick's status: its seq tells a lockstep world (and so the coordinator)
         # which statuses this tick produced
-        out = CmdVel(robot=self.rid, tick=sense.tick, status_seq=self.seq)
+        out = CmdVel(robot=self.rid, tick=sense.tick, status_seq=self.core.seq)
         if cmd is not None:
             out.vx, out.vy, out.wz = cmd.vx, cmd.vy, cmd.wz
         self.last_cmd = out.encode()
@@ -354,7 +343,7 @@ def _serve(args, session, keys, stop) -> int:
         node.stop_robot()
         log.info("robot %d stopped: %d ticks, %d skipped or repeated, %d invalid messages, "
                  "%d behaviour errors, %d ticks without an announced task", args.id,
-                 node.ticks, node.skipped, node.rx.invalid_total, node.errors,
+                 node.core.ticks, node.skipped, node.rx.invalid_total, node.core.errors,
                  node.task_waits)
     finally:
         if node is not None:

@@ -51,7 +51,7 @@ class SimLoop:
 
     def __init__(self, cfg, *, seed: int | None = None, coordinator_overrides: dict | None = None,
                  status_every: int | None = None):
-        from agents.behaviours import Behaviour
+        from agents.core import AgentCore
         from agents.params import from_config
         from coordinator.config import CoordinatorConfig
         from coordinator.deployer import Deployer
@@ -79,7 +79,7 @@ class SimLoop:
         # the agent processes read the resolved config's text (run --run-config), which is
         # this dict as TOML (tests/test_agent_params.py checks the two agree on every config)
         self.agent_params = from_config(to_dict(cfg), str(cfg.path))
-        self._Behaviour = Behaviour
+        self._AgentCore = AgentCore
         section = dict(cfg.section("coordinator"))
         section.update(coordinator_overrides or {})
         self.ccfg = CoordinatorConfig.from_section(section, rv=cfg.rv, where=cfg.path)
@@ -88,9 +88,7 @@ class SimLoop:
                             robot_kind=robot_kinds_from_config(cfg),
                             robot_radius=cfg.robots.radius)
         self.join_ticks = join_ticks(self.dt)
-        self.agents: dict = {}                 # rid -> Behaviour (its agent runs)
-        self.seq: dict[int, int] = {}          # rid -> last Status seq
-        self.own_ticks: dict[int, int] = {}    # rid -> ticks its agent stepped
+        self.agents: dict = {}                 # rid -> AgentCore (its agent runs)
         self.status_every = status_every
         self.tick = 0
         self.t = 0.0
@@ -136,9 +134,8 @@ class SimLoop:
                 x, y, th = self.wm.sources[m.source]
                 self.physics.add(m.robot, x, y, th, m.kind, False)
                 p = dataclasses.replace(self.agent_params, kind=m.kind)
-                self.agents[m.robot] = self._Behaviour(p, m.robot)
-                self.seq[m.robot] = 0
-                self.own_ticks[m.robot] = 0
+                self.agents[m.robot] = self._AgentCore(p, m.robot, status_every=self.status_every,
+                                                       log=log)
                 self.joins[m.robot] = self.tick + self.join_ticks
                 self.spawned += 1
             else:
@@ -155,10 +152,6 @@ class SimLoop:
         in the distributed system)."""
         self.agents.pop(rid, None)
         self._gone.add(rid)
-
-    def _status(self, rid: int, beh, t: float, tick: int) -> Status:
-        self.seq[rid] += 1
-        return beh.status_message(self.seq[rid], t, tick)
 
     # ------------------------------------------------------------------ loop
     def _boundary(self) -> bool:
@@ -194,25 +187,22 @@ class SimLoop:
         cmds = np.zeros((len(ids), 3))
         if ids and self.tick % self.sense_every == 0:
             per = self.sensors.sense(pos, th).lists(ids)
-            every = self.status_every or self.agent_params.status_every
             for k, rid in enumerate(ids):
-                beh = self.agents.get(rid)
+                core = self.agents.get(rid)
                 joining = self.joins.get(rid, 1 << 62) <= self.tick
-                if beh is None or (rid not in self.roster and not joining):
+                if core is None or (rid not in self.roster and not joining):
                     continue
                 if rid in self.joins:   # its first tick: the agent's start-up status
-                    self._statuses.append(self._status(rid, beh, 0.0, -1))
-                    beh.changed = False
+                    self._statuses.append(core.status())
                     self._joined.add(rid)
                 for task in self._tasks.pop(rid, ()):
-                    beh.on_task(task)
+                    core.beh.on_task(task)
                 s = Sense(robot=rid, tick=self.tick, t=self.t, **per[k])
-                c = beh.step(s)
-                cmds[k] = (c.vx, c.vy, c.wz)
-                self.own_ticks[rid] += 1
-                if beh.changed or self.own_ticks[rid] % every == 0:
-                    self._statuses.append(self._status(rid, beh, self.t, self.tick))
-                    beh.changed = False
+                c, st = core.step(s)
+                if c is not None:
+                    cmds[k] = (c.vx, c.vy, c.wz)
+                if st is not None:
+                    self._statuses.append(st)
         for rid, ts in tasks.items():   # the coordinator's tasks of this tick: next Sense
             if rid in self.agents:
                 self._tasks.setdefault(rid, []).extend(ts)

@@ -139,10 +139,9 @@ def test_a_fresh_coordinator_resumes_from_statuses():
             res["swapped"] = len(cx.vertices)
             old = sim.dep
             sim.dep = Deployer(old.cfg, sources=old.sources, epoch=2)
-            for rid, beh in sim.agents.items():
+            for rid, core in sim.agents.items():
                 sim.dep.on_alive(rid, True, sim.t)
-                sim.seq[rid] += 1
-                sim.dep.on_status(Status(robot=rid, seq=sim.seq[rid], t=sim.t, **beh.status()))
+                sim.dep.on_status(core.status())
 
     out = sim.run(max_sim_s=1500, max_wall_s=180, on_cycle=swap)
     assert res["swapped"] >= 4
