@@ -584,9 +584,12 @@ def main(argv: list[str] | None = None) -> int:
         make_config(session_args(own, connect, swarm))  # a bad --config FILE or --cfg: exit 2
         out = prepare_out(Path(args.out or f"runs/{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"))
         from swarmcover.configref import complete_resolved_toml
-        # every value the run uses, [agent] and [coordinator] defaults included (what the
-        # processes read back is the same config: only defaults are written out)
-        (out / "resolved.toml").write_text(complete_resolved_toml(resolved, str(args.run_config)))
+        # every value the run uses, [agent], [coordinator] and [hwbridge] defaults included
+        # (what the processes read back is the same config: only defaults are written out);
+        # the wall timeout is run's own, not a config field: a comment on the first line
+        (out / "resolved.toml").write_text(complete_resolved_toml(
+            resolved, str(args.run_config),
+            header=f"swarmcover run --wall-timeout {args.wall_timeout:g} (s)"))
     except (ValueError, OSError) as e:
         print(f"swarmcover run: {' '.join(str(e).split())}", file=sys.stderr)
         return 2
