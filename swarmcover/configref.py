@@ -332,10 +332,43 @@ def docs_markdown() -> str:
     return "\n".join(out)
 
 
-def complete_resolved_toml(text: str, path: str = "<resolved>") -> str:
-    """A resolved run config (world/config.py ``to_toml``) with its [agent] and [coordinator]
-    tables filled in with every value the agents and coordinator use (defaults included),
-    so ``resolved.toml`` records the whole run. Other tables are kept as they are."""
+def _toml_ready(v):
+    """A resolved value as TOML takes it: dataclasses (the transform) as tables, tuples as
+    arrays."""
+    if dataclasses.is_dataclass(v):
+        return {f.name: _toml_ready(getattr(v, f.name)) for f in dataclasses.fields(v)}
+    if isinstance(v, (list, tuple)):
+        return [_toml_ready(x) for x in v]
+    return v
+
+
+def _resolved_hwbridge(raw: dict, path: str) -> dict:
+    """[hwbridge] with every value the bridge and the stand-in robots use: the fields of the
+    reference's [hwbridge], [[hwbridge.robots]] and [hwbridge.fake] sections, read from the
+    BridgeConfig that hwbridge/config.py resolves (defaults, [robots].v_max/w_max and
+    "/<body>" namespaces included). A robot's ``start`` stays out when unset: the fake robot
+    then starts at its source, found when it starts."""
+    from hwbridge.config import from_dict
+    bc = from_dict(raw, path)
+    secs = {s.name: s.fields for s in sections()}
+
+    def table(obj, fields) -> dict:
+        vals = {f.name: _toml_ready(getattr(obj, f.name)) for f in fields}
+        return {k: v for k, v in vals.items() if v is not None}
+
+    hb = table(bc, secs["hwbridge"])
+    if bc.geofence is None:
+        hb["geofence"] = "none"
+    hb["robots"] = [table(r, secs["hwbridge.robots"]) for r in bc.robots]
+    hb["fake"] = table(bc.fake, secs["hwbridge.fake"])
+    return hb
+
+
+def complete_resolved_toml(text: str, path: str = "<resolved>", header: str = "") -> str:
+    """A resolved run config (world/config.py ``to_toml``) with its [agent], [coordinator]
+    and (when present) [hwbridge] tables filled in with every value their readers use
+    (defaults included), so ``resolved.toml`` records the whole run. Other tables are kept
+    as they are. header: comment lines put first (values of the run that are not config)."""
     import tomllib
 
     from agents.params import from_config
@@ -347,7 +380,10 @@ def complete_resolved_toml(text: str, path: str = "<resolved>") -> str:
                     if f.name not in _AGENT_SKIP}
     raw["coordinator"] = {f.name: getattr(coord, f.name) for f in dataclasses.fields(coord)
                           if f.name != "rv"}
-    return dumps_toml(raw)
+    if "hwbridge" in raw:
+        raw["hwbridge"] = _resolved_hwbridge(raw, path)
+    head = "".join(f"# {ln}\n" for ln in header.splitlines())
+    return head + dumps_toml(raw)
 
 
 def check_text(text: str, path: str = "<config>", base_dir: str = ".") -> list[str]:

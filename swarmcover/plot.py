@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from bus import messages as m
+from viz.geometry import redundant_robots
 
 log = logging.getLogger("swarmcover.plot")
 
@@ -131,8 +132,7 @@ def load_run(path: str | Path, *, max_truth_frames: int = 400, progress: bool = 
             if msg.source == "mocap":
                 mocap[msg.robot] = (msg.x, msg.y)
         elif isinstance(msg, m.Complex):
-            occ = dict(zip(msg.vertices, msg.occupants))
-            redundant |= {occ[v] for v in msg.redundant if occ.get(v, -1) >= 0}
+            redundant |= redundant_robots(msg)
             frames[msg.cycle] = Frame(msg, truth, dict(mocap), t, frozenset(redundant))
             if truth is None:
                 pending.append(frames[msg.cycle])

@@ -478,6 +478,7 @@ class RunState:
     refused: dict = dataclasses.field(default_factory=dict)  # "complex: why" -> count
     recheck: dict | None = None
     limits: dict = dataclasses.field(default_factory=dict)   # robots_max and where from
+    removed: set = dataclasses.field(default_factory=set)    # robots marked redundant so far
 
     def saw_truth(self, truth: Truth | None) -> None:
         if truth is not None:
@@ -503,6 +504,14 @@ class RunState:
         self.certified = reason == "certified"
         self.rc = rc if rc is not None else (0 if self.certified else EXIT_NOT_CERTIFIED)
         return True
+
+    def saw_complex(self, cx: Complex) -> int:
+        """An accepted Complex: the latest one, the robots it marks redundant (final.png
+        marks them while outside the complex), and the cycles so far (``on_cycle``)."""
+        from viz.geometry import redundant_robots
+        self.last_cx = cx
+        self.removed |= redundant_robots(cx)
+        return self.on_cycle(cx)
 
     def refuse(self, what: str, why: str) -> None:
         k = f"{what}: {why}"
@@ -584,9 +593,12 @@ def main(argv: list[str] | None = None) -> int:
         make_config(session_args(own, connect, swarm))  # a bad --config FILE or --cfg: exit 2
         out = prepare_out(Path(args.out or f"runs/{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"))
         from swarmcover.configref import complete_resolved_toml
-        # every value the run uses, [agent] and [coordinator] defaults included (what the
-        # processes read back is the same config: only defaults are written out)
-        (out / "resolved.toml").write_text(complete_resolved_toml(resolved, str(args.run_config)))
+        # every value the run uses, [agent], [coordinator] and [hwbridge] defaults included
+        # (what the processes read back is the same config: only defaults are written out);
+        # the wall timeout is run's own, not a config field: a comment on the first line
+        (out / "resolved.toml").write_text(complete_resolved_toml(
+            resolved, str(args.run_config),
+            header=f"swarmcover run --wall-timeout {args.wall_timeout:g} (s)"))
     except (ValueError, OSError) as e:
         print(f"swarmcover run: {' '.join(str(e).split())}", file=sys.stderr)
         return 2
@@ -696,7 +708,7 @@ def _write_report(args, cfg, wmap, out: Path, state: RunState, t_wall0: float) -
     text = strict_json(summary, indent=2)
     (out / "summary.json").write_text(text + "\n")
     if state.info is not None:
-        _final_png(state.info, out, truth, cx, cfg)
+        _final_png(state, out, truth, cx, cfg)
     print(strict_json(summary), flush=True)
     return summary
 
@@ -902,8 +914,7 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                     if why:
                         state.refuse("complex", why)
                         continue
-                    state.last_cx = cx
-                    total = state.on_cycle(cx)
+                    total = state.saw_complex(cx)
                     truth = state.last_truth
                     if truth is not None and truth.ids:
                         coverage = float(coverage_fraction(wmap, np.c_[truth.x, truth.y], cfg.rv))
@@ -1057,11 +1068,18 @@ def _check_agents(launcher: Launcher, unready: dict, state: RunState) -> None:
         log.warning("%s ended by signal %d before it was ready", name, -rc)
 
 
-def _final_png(info, out: Path, truth, cx, cfg) -> None:
+def final_figure(state: RunState, truth, cx, cfg):
+    """final.png's figure: the world's map, the decided truth and complex, and the robots
+    removed as redundant that the run saw on the bus (``RunState.removed``) with their mark."""
+    from viz.figures import snapshot_figure
+    return snapshot_figure(state.info, truth, cx, removed=state.removed,
+                           title=f"{cfg.name}: {'certified' if cx and cx.certified else 'not certified'}")
+
+
+def _final_png(state: RunState, out: Path, truth, cx, cfg) -> None:
     try:
-        from viz.figures import render_snapshot
-        render_snapshot(info, truth, cx, str(out / "final.png"),
-                        title=f"{cfg.name}: {'certified' if cx and cx.certified else 'not certified'}")
+        from viz.figures import SNAPSHOT_DPI
+        final_figure(state, truth, cx, cfg).savefig(out / "final.png", dpi=SNAPSHOT_DPI)
     except Exception as e:  # a missing figure must not lose the summary
         log.warning("could not draw final.png: %s", e)
 

@@ -32,6 +32,7 @@ from foxglove import Schema
 
 from bus import messages as m
 from ground.geometry import flat_to_points
+from viz.geometry import redundant_robots
 
 SCENE_TOPIC = "/swarmcover/scene"
 FRAME = "map"
@@ -103,8 +104,7 @@ class SceneState:
                 del self.mocap[r]
         elif isinstance(msg, m.Complex):
             self.cx = msg
-            occ = dict(zip(msg.vertices, msg.occupants))
-            self.removed |= {occ[v] for v in msg.redundant if occ.get(v, -1) >= 0}
+            self.removed |= redundant_robots(msg)
         elif isinstance(msg, m.WorldInfo):
             self.info = msg
         elif isinstance(msg, m.Pose) and msg.source == "mocap":

@@ -43,7 +43,7 @@ from bus.session import undeclare
 
 import viz as _viz
 from viz.coverage import coverage_measure, map_bounds, polygon_xy
-from viz.geometry import build_scene
+from viz.geometry import build_scene, redundant_robots
 
 log = logging.getLogger("swarmcover.view")
 PAGE = Path(_viz.__file__).with_name("static") / "view.html"  # package data of viz
@@ -103,8 +103,7 @@ class LiveState:
             self._cov_dirty = True
         elif isinstance(msg, m.Complex):
             self.cx = msg
-            occ = dict(zip(msg.vertices, msg.occupants))
-            self.removed |= {occ[v] for v in msg.redundant if occ.get(v, -1) >= 0}
+            self.removed |= redundant_robots(msg)
         elif isinstance(msg, m.Pose):
             if msg.source == "mocap":
                 self.mocap[msg.robot] = (msg.x, msg.y)

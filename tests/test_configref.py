@@ -117,3 +117,31 @@ def test_completed_resolved_toml_holds_every_agent_and_coordinator_value():
     assert (CoordinatorConfig.from_section(raw["coordinator"], cfg.rv)
             == CoordinatorConfig.from_section(orig.get("coordinator"), cfg.rv))
     check_text(full)
+
+
+def test_completed_resolved_toml_holds_every_hwbridge_value_of_a_mixed_run():
+    """Every key the bridge reads ([hwbridge], each [[hwbridge.robots]], [hwbridge.fake],
+    the transform) is written with the value used, and the file still validates as the same
+    config. A robot's ``start`` has no value to write: unset, the fake robot starts at its
+    source."""
+    from hwbridge.config import FAKE_KEYS, ROBOT_KEYS, TOP_KEYS, TRANSFORM_KEYS, from_dict
+    from swarmcover.configref import complete_resolved_toml
+    from world.config import load_config, loads_config, to_toml
+    src = ROOT / "configs" / "mixed.toml"
+    cfg = load_config(src)
+    full = complete_resolved_toml(to_toml(cfg), header="swarmcover run: wall timeout 8 s")
+    assert full.startswith("# swarmcover run: wall timeout 8 s\n")
+    hb = tomllib.loads(full)["hwbridge"]
+    assert set(hb) == TOP_KEYS, TOP_KEYS ^ set(hb)
+    assert set(hb["transform"]) == TRANSFORM_KEYS and set(hb["fake"]) == FAKE_KEYS
+    assert [set(r) for r in hb["robots"]] == [ROBOT_KEYS - {"start"}] * 2
+    assert hb["silence_s"] == 0.5 and hb["cmd_ttl_s"] == 0.3 and hb["ros_domain"] == 0
+    assert hb["robots"][0]["ros_namespace"] == "/scarab1"  # the "/<body>" default, resolved
+    # the same config: the bridge, the world and every other owner read the same values
+    orig = tomllib.loads(src.read_text())
+    same = dict(path="", raw={})
+    assert (dataclasses.replace(from_dict(tomllib.loads(full)), **same)
+            == dataclasses.replace(from_dict(orig), **same))
+    world = dataclasses.replace(loads_config(full, str(src), str(src.parent)), sections={})
+    assert world == dataclasses.replace(cfg, sections={})
+    assert "hwbridge" in check_text(full)

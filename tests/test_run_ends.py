@@ -1,6 +1,7 @@
 """How `swarmcover run` ends, with real processes on the tiny map: forged certificates and
-spawns are refused, agents that fail at start end the run with their error, robots_max and
-a dead world end it promptly, and summary.json (strict JSON) says why every time."""
+spawns are refused, agents that fail at start end the run with their error, a wall
+timeout, robots_max and a dead world end it promptly, and summary.json (strict JSON) says
+why every time."""
 from __future__ import annotations
 
 import json
@@ -148,4 +149,26 @@ def test_a_dead_world_still_leaves_a_summary(procs, tmp_path):
     s = _strict(out / "summary.json")
     assert s["stop_reason"] == "world_died" and "world" in s["stop_detail"]
     assert s["cycles"] >= 1
+    no_leftovers(out)
+
+
+@pytest.mark.timeout(60)
+def test_a_wall_timeout_ends_the_run_uncertified_with_its_reason(procs, tmp_path):
+    """Eight wall seconds cannot certify the tiny map (it takes about a minute): run stops at
+    its wall timeout with exit 1, and summary.json (strict JSON) says why, with null ratios."""
+    out = tmp_path / "run"
+    t0 = time.monotonic()
+    p = procs.swarmcover("run", "configs/tiny.toml", "--out", out, "--quiet", "--port",
+                         free_port(), "--wall-timeout", "8")
+    rc = p.wait(45)
+    s = _strict(out / "summary.json")
+    assert s["stop_reason"] == "wall_timeout", (rc, s, p.output()[-2000:])
+    assert rc == 1 and s["exit_code"] == 1 and s["certified"] is False, s
+    assert s["stop_detail"] == "wall timeout 8 s" and 8.0 <= s["wall_time_s"] < 30.0, s
+    assert s["ratio"] is None and s["ratio_same_spacing"] is None
+    assert s["robots_per_bound"] is None
+    assert "NOT certified (wall_timeout" in p.output()
+    # the timeout is recorded with the config the run used
+    assert (out / "resolved.toml").read_text().startswith("# swarmcover run --wall-timeout 8 (s)")
+    assert time.monotonic() - t0 < 40
     no_leftovers(out)

@@ -246,3 +246,31 @@ def test_only_the_coordinators_session_with_the_run_key_is_believed():
     assert c.check(k, payload + b"x", "0a1b2c", mac(key, k, payload)) != ""
     # a genuine sample moved to another key does not verify either
     assert c.check("sc/tiny/world/spawn", payload, "0a1b2c", mac(key, k, payload)) != ""
+
+
+def test_final_png_marks_the_robots_the_run_saw_removed_as_redundant():
+    """final.png's figure gets the robots that accepted Complexes marked redundant: robot 7,
+    redundant at cycle 1 and outside the complex at cycle 2, is drawn as a grey diamond
+    (the `plot` command's, the GIF's and the live views' mark), not as a hollow robot."""
+    from types import SimpleNamespace
+
+    from bus.messages import WorldInfo
+    from swarmcover.run import final_figure
+    from viz.figures import COLORS
+    tri = dict(edges=[0, 1, 0, 2, 1, 2], triangles=[0, 1, 2], obstacle=[0, 1])
+    state = RunState(info=WorldInfo(name="room", rv=1.0, robot_radius=0.06, dt=0.05,
+                                    boundary=[-1, -1, 5, -1, 5, 4, -1, 4], obstacles=[],
+                                    sources=[0.3, 0.3, 0.0], free_area=30.0, config=""))
+    state.saw_complex(Complex(cycle=1, epoch=1, vertices=[0, 1, 2, 3], occupants=[0, 1, 2, 7],
+                              redundant=[3], **tri))
+    state.saw_complex(Complex(cycle=2, epoch=1, vertices=[0, 1, 2], occupants=[0, 1, 2], **tri))
+    assert state.removed == {7} and state.last_cx.cycle == 2 and state.cycles == 2
+    truth = Truth(tick=1, t=0.0, ids=[0, 1, 2, 7], x=[0.0, 2.0, 1.0, 3.5],
+                  y=[0.0, 0.0, 1.6, 3.0], theta=[0.0] * 4, live=[False] * 4)
+    fig = final_figure(state, truth, state.last_cx, SimpleNamespace(name="room"))
+    fig.canvas.draw()
+    assert "removed (redundant)" in [t.get_text() for t in fig.legends[0].get_texts()]
+    img = np.asarray(fig.canvas.buffer_rgba())[..., :3].astype(int)
+    X, Y = fig.axes[0].transData.transform((3.5, 3.0))
+    grey = np.array([int(COLORS["removed"][k:k + 2], 16) for k in (1, 3, 5)])
+    assert np.abs(img[int(round(img.shape[0] - Y)), int(round(X))] - grey).max() <= 3

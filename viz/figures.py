@@ -194,9 +194,12 @@ def snapshot_figure(info, truth=None, cx=None, *, title: str = "", show_disks: b
     return fig
 
 
+SNAPSHOT_DPI = 110   # the PNG snapshots (plot's frames, run's final.png)
+
+
 def render_snapshot(info, truth=None, cx=None, path: str | os.PathLike = "snapshot.png", *,
                     title: str = "", show_disks: bool = False, mocap: dict | None = None,
-                    dpi: int = 110, removed=()) -> Path:
+                    dpi: int = SNAPSHOT_DPI, removed=()) -> Path:
     """Draw one instant to a PNG file and return its path.
 
     info: WorldInfo (map); truth: Truth or None (no robots); cx: Complex or None (no

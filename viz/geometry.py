@@ -60,6 +60,13 @@ def _segments(pairs: list[tuple[int, int]], vpos: dict) -> np.ndarray:
     return np.asarray(segs, float).reshape(-1, 2, 2)
 
 
+def redundant_robots(cx) -> set[int]:
+    """The robots on ``cx``'s redundant vertices (being removed); callers that keep a
+    history of them mark those robots while they are outside the complex."""
+    occ_of = {int(v): int(r) for v, r in zip(cx.vertices, cx.occupants)}
+    return {occ_of.get(int(v), -1) for v in cx.redundant} - {-1}
+
+
 def build_scene(truth, cx, mocap: dict | None = None, removed=()) -> Scene:
     """The Scene of a Truth and a Complex (either may be None). removed: robot ids removed
     as redundant so far (marked while they hold no vertex)."""
@@ -80,8 +87,7 @@ def build_scene(truth, cx, mocap: dict | None = None, removed=()) -> Scene:
     if s.t is None:
         s.t = float(cx.t)
     occupied = {int(r) for r in cx.occupants if r >= 0}
-    occ_of = {int(v): int(r) for v, r in zip(cx.vertices, cx.occupants)}
-    red_robots = {occ_of.get(int(v), -1) for v in cx.redundant} - {-1}
+    red_robots = redundant_robots(cx)
     s.in_complex = np.array([int(r) in occupied for r in s.ids], bool)
     s.redundant = np.array([int(r) in red_robots for r in s.ids], bool)
     vpos = vertex_positions(truth, cx)
