@@ -1,5 +1,6 @@
-"""ROS 2 over Zenoh without ROS: CDR encoding of the few messages we need, and the Zenoh
-keys on which ROS 2 topics appear (pure functions, no ROS installation needed).
+"""ROS 2 over Zenoh without ROS: the CDR codecs of the two messages the bridge needs
+(geometry_msgs/Twist out, geometry_msgs/PoseStamped in), and the Zenoh keys on which ROS 2
+topics appear (pure functions, no ROS installation needed).
 
 Key mapping (checked against the sources, see docs in hwbridge/README.md):
 
@@ -17,7 +18,14 @@ Key mapping (checked against the sources, see docs in hwbridge/README.md):
 
 CDR (OMG CDR v1 as used by ROS 2): a 4-byte encapsulation header ``00 01 00 00`` (little
 endian; ``00 00 00 00`` is big endian), then each primitive aligned to its size relative
-to the end of the header.
+to the end of the header. rosbags' typestore (the maintained CDR library
+swarmcover/ros2.py also uses) encodes and decodes both messages; this module adds the
+checks it does not make (finite values, the header named in the error) and turns its
+errors into :class:`CdrError`. bench/cdr.py measured it against the hand-written struct
+codecs it replaced (which wrote the same bytes; the tests check that on random messages):
+a PoseStamped decode takes ~9 us against ~6 us, so 20 robots x 200 Hz mocap (4,000 poses
+a second, the top of the bridge's rate band) cost ~3.5% of one core against ~2.3%, and the
+Twist (20 robots x 20 Hz) well under 1% either way.
 """
 from __future__ import annotations
 
@@ -25,9 +33,13 @@ import math
 import struct
 from dataclasses import dataclass
 
+from rosbags.serde import SerdeError
+
 CDR_LE = b"\x00\x01\x00\x00"
 CDR_BE = b"\x00\x00\x00\x00"
 
+TWIST = "geometry_msgs/msg/Twist"
+POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 TWIST_DDS_TYPE = "geometry_msgs::msg::dds_::Twist_"
 # REP-2011 type hash of geometry_msgs/msg/Twist (Iron, Jazzy, Rolling), as used in rmw_zenoh
 # keys by public rmw_zenoh-compatible code (e.g. "0/cmd_vel/geometry_msgs::msg::dds_::Twist_/
@@ -126,17 +138,10 @@ def encode_twist(tw: Twist) -> bytes:
     vals = (tw.lx, tw.ly, tw.lz, tw.ax, tw.ay, tw.az)
     if not all(math.isfinite(v) for v in vals):
         raise ValueError(f"Twist: non-finite value in {vals}")
-    from swarmcover.ros2 import serialize, typestore
-    T = typestore().types
-    V3 = T["geometry_msgs/msg/Vector3"]
-    msg = T["geometry_msgs/msg/Twist"](linear=V3(x=float(tw.lx), y=float(tw.ly), z=float(tw.lz)),
-                                       angular=V3(x=float(tw.ax), y=float(tw.ay), z=float(tw.az)))
-    return serialize(msg, "geometry_msgs/msg/Twist")
-
-
-# rosbags builds its type store and generates the Twist serialiser on first use (0.75 s
-# measured): do it at import, so the first command a robot gets is not late by that
-encode_twist(Twist())
+    V3 = _T.Vector3
+    msg = _T.Twist(linear=V3(x=float(tw.lx), y=float(tw.ly), z=float(tw.lz)),
+                   angular=V3(x=float(tw.ax), y=float(tw.ay), z=float(tw.az)))
+    return bytes(_T.store.serialize_cdr(msg, TWIST))
 
 
 def _endian(data: bytes, what: str) -> str:
@@ -147,15 +152,41 @@ def _endian(data: bytes, what: str) -> str:
     return "<" if data[1] == 1 else ">"
 
 
-def decode_twist(data: bytes) -> Twist:
-    """Inverse of :func:`encode_twist`; also accepts big endian. Raises CdrError."""
-    data = bytes(data)
-    e = _endian(data, "Twist")
-    if len(data) < 52:
-        raise CdrError(f"Twist: {len(data)} bytes, expected 52")
-    vals = struct.unpack_from(e + "6d", data, 4)
+def _deserialize(data: bytes, typename: str, what: str, size: int = 0):
+    """rosbags' deserialize_cdr, its errors as CdrError naming what was wrong. ``size``: the
+    message's fixed size in bytes, header included (0: variable)."""
+    try:
+        return _T.store.deserialize_cdr(data, typename)
+    except (SerdeError, struct.error, ValueError) as e:  # rosbags wraps struct.error, mostly
+        _endian(data, what)  # a short or foreign header, named
+        if len(data) < size:
+            raise CdrError(f"{what}: {len(data)} bytes, expected {size}") from None
+        cause = e.__cause__ or e
+        if isinstance(cause, UnicodeDecodeError):
+            why = "frame_id is not UTF-8"
+        elif isinstance(cause, struct.error):
+            why = f"{len(data)} bytes, too short"
+        elif "size mismatch" in str(e):  # 4 or more bytes left over (3 may be padding)
+            why = f"{len(data)} bytes, longer than the message: another type?"
+        elif "string" in str(e):  # rosbags: "Invalid string length", "Missing string terminator"
+            why = f"frame_id ({len(data)} bytes in all): {e}"
+        else:
+            why = f"{len(data)} bytes: {e}"
+        raise CdrError(f"{what}: {why}") from None
+
+
+def _check_finite(vals: tuple[float, ...], what: str) -> None:
     if not all(math.isfinite(v) for v in vals):
-        raise CdrError(f"Twist: non-finite value in {vals}")
+        raise CdrError(f"{what}: non-finite value in {vals}")
+
+
+def decode_twist(data: bytes) -> Twist:
+    """Inverse of :func:`encode_twist`, by rosbags; also accepts big endian. Raises CdrError,
+    also for 4 or more bytes after the message (the struct decoder ignored them)."""
+    m = _deserialize(bytes(data), TWIST, "Twist", 52)
+    lin, ang = m.linear, m.angular
+    vals = (lin.x, lin.y, lin.z, ang.x, ang.y, ang.z)
+    _check_finite(vals, "Twist")
     return Twist(*vals)
 
 
@@ -171,38 +202,45 @@ class PoseStamped:
 
 
 def encode_pose_stamped(p: PoseStamped) -> bytes:
-    """CDR little endian (for stand-in mocap publishers and tests)."""
+    """CDR little endian by rosbags (for stand-in mocap publishers and tests). The stamp is
+    split into whole seconds (int32, floor) and nanoseconds (rounded, at most 999,999,999)."""
     sec = math.floor(p.stamp)
     nsec = min(int(round((p.stamp - sec) * 1e9)), 999_999_999)
-    fid = p.frame_id.encode() + b"\x00"
-    body = bytearray(struct.pack("<iI", sec, nsec) + struct.pack("<I", len(fid)) + fid)
-    body += b"\x00" * (-len(body) % 8)
-    body += struct.pack("<7d", *p.position, *p.orientation)
-    return CDR_LE + bytes(body)
+    (x, y, z), (qx, qy, qz, qw) = p.position, p.orientation
+    msg = _T.PoseStamped(
+        header=_T.Header(stamp=_T.Time(sec=sec, nanosec=nsec), frame_id=p.frame_id),
+        pose=_T.Pose(position=_T.Point(x=float(x), y=float(y), z=float(z)),
+                     orientation=_T.Quaternion(x=float(qx), y=float(qy), z=float(qz),
+                                               w=float(qw))))
+    return bytes(_T.store.serialize_cdr(msg, POSE_STAMPED))
 
 
 def decode_pose_stamped(data: bytes) -> PoseStamped:
-    """Decode a CDR geometry_msgs/PoseStamped (either endianness). Raises CdrError."""
-    data = bytes(data)
-    e = _endian(data, "PoseStamped")
-    body = data[4:]
-    if len(body) < 12:
-        raise CdrError(f"PoseStamped: {len(data)} bytes, too short for a header")
-    sec, nsec, n = struct.unpack_from(e + "iII", body, 0)
-    if n < 1 or 12 + n > len(body):
-        raise CdrError(f"PoseStamped: frame_id length {n} does not fit in {len(data)} bytes")
-    raw = body[12:12 + n]
-    if raw[-1:] != b"\x00":
-        raise CdrError("PoseStamped: frame_id is not NUL-terminated")
-    try:
-        frame_id = raw[:-1].decode()
-    except UnicodeDecodeError:
-        raise CdrError("PoseStamped: frame_id is not UTF-8") from None
-    off = 12 + n
-    off += -off % 8
-    if off + 56 > len(body):
-        raise CdrError(f"PoseStamped: {len(data)} bytes, too short for the pose")
-    vals = struct.unpack_from(e + "7d", body, off)
-    if not all(math.isfinite(v) for v in vals):
-        raise CdrError(f"PoseStamped: non-finite value in {vals}")
-    return PoseStamped(sec + nsec * 1e-9, frame_id, vals[:3], vals[3:])
+    """Decode a CDR geometry_msgs/PoseStamped (either endianness) by rosbags. Raises CdrError,
+    also for 4 or more bytes after the message, so a PoseWithCovarianceStamped (a
+    PoseStamped's bytes then 36 float64) is refused, not read as its first 84 bytes."""
+    m = _deserialize(bytes(data), POSE_STAMPED, "PoseStamped")
+    stamp, pos, q = m.header.stamp, m.pose.position, m.pose.orientation
+    vals = (pos.x, pos.y, pos.z, q.x, q.y, q.z, q.w)
+    _check_finite(vals, "PoseStamped")
+    return PoseStamped(stamp.sec + stamp.nanosec * 1e-9, m.header.frame_id, vals[:3], vals[3:])
+
+
+class _Types:
+    """rosbags' type store and the message classes the codecs above build, looked up once."""
+
+    def __init__(self):
+        from swarmcover.ros2 import typestore
+        self.store = typestore()
+        T = self.store.types
+        for name in ("geometry_msgs/msg/Vector3", TWIST, "geometry_msgs/msg/Point",
+                     "geometry_msgs/msg/Quaternion", "geometry_msgs/msg/Pose", POSE_STAMPED,
+                     "std_msgs/msg/Header", "builtin_interfaces/msg/Time"):
+            setattr(self, name.rsplit("/", 1)[1], T[name])
+
+
+# rosbags builds its type store and generates each message's (de)serialisers on first use
+# (0.75 s measured): do it at import, so the first command a robot gets is not late by that
+_T = _Types()
+decode_twist(encode_twist(Twist()))
+decode_pose_stamped(encode_pose_stamped(PoseStamped(0.0, "map", (0.0,) * 3, (0.0, 0.0, 0.0, 1.0))))
