@@ -70,30 +70,10 @@ class Command:
 STOP = Command()
 
 
-def _perceived(name: str, doc: str) -> property:
-    """A Behaviour attribute that is its :class:`Perception`'s ``name``."""
-    def get(self):
-        return getattr(self.see, name)
-
-    def set_(self, value):
-        setattr(self.see, name, value)
-    return property(get, set_, doc=doc)
-
-
 class Behaviour:
     """One robot's behaviour. Call :meth:`on_task` for each Task and :meth:`step` for each
     Sense; read :meth:`status` for the Status fields and :attr:`changed` (set when the
     state, the task state or the contact flag changed; the caller clears it)."""
-
-    n = _perceived("n", "Sense ticks handled")
-    t = _perceived("t", "Sense.t of the current tick (s), None before the first")
-    dt = _perceived("dt", "last measured tick length (s)")
-    seen = _perceived("seen", "neighbour id -> bearing (rad, body frame) this tick")
-    back = _perceived("back", "neighbour id -> its bearing of us (rad) this tick")
-    obst = _perceived("obst", "obstacle touch sectors this tick (rad, body frame)")
-    bumped_t = _perceived("bumped_t", "last time another robot touched us (s)")
-    heading = _perceived("heading", "integral of the commanded turn rate (rad)")
-    advance = _perceived("advance", "integral of the commanded velocity along its intent (m)")
 
     def __init__(self, params: AgentParams, robot: int):
         self.p = params
@@ -193,7 +173,7 @@ class Behaviour:
             self.changed = True
         task = self.task
         if (task is not None and self.task_state is TaskState.RUNNING and task.timeout_s > 0
-                and task.kind not in ("hold", "leave") and self.t - self.t0 > task.timeout_s):
+                and task.kind not in ("hold", "leave") and self.see.t - self.t0 > task.timeout_s):
             self._finish(TaskState.FAILED, self._fail_reason("timeout"))
         self.intent = None
         ux, uy = self._tick()
@@ -269,7 +249,7 @@ class Behaviour:
         if not self.p.aligned:
             return None
         if task.ref_offsets:
-            return FrameTracker(dict(zip(task.landmarks, task.ref_offsets)), self.heading)
+            return FrameTracker(dict(zip(task.landmarks, task.ref_offsets)), self.see.heading)
         return self.see.snapshot_frame()
 
     def _task_goal(self, task: Task) -> dict[int, float]:
@@ -359,7 +339,7 @@ class Behaviour:
 
     def _start(self, task: Task) -> None:
         self.task = task
-        self.t0 = self.t
+        self.t0 = self.see.t
         self.vertex = task.vertex
         self.progress = 0.0
         self.phase = Phase.NONE
@@ -381,7 +361,7 @@ class Behaviour:
                 self._enter_home(goal, Phase.DEPLOY)
             else:
                 single = next(iter(goal)) if goal else None
-                if single is not None and single not in self.seen:
+                if single is not None and single not in self.see.seen:
                     single = None  # not in view at the start: nothing to keep in sight
                 self._enter_open(task.direction, task.distance,
                                  self.p.deploy_speed_frac * self.p.v_max, Phase.DEPLOY, single)
@@ -470,7 +450,7 @@ class Behaviour:
     def _home_back(self, goal: dict[int, float] | None) -> None:
         """Home back to the vertex on ``goal`` if enough of it is in view, else fail with
         the return reason."""
-        if goal and sum(1 for l in goal if l in self.seen) >= min(2, len(goal)):
+        if goal and sum(1 for l in goal if l in self.see.seen) >= min(2, len(goal)):
             self._enter_home(goal, Phase.RETURN)
         else:
             self._finish(TaskState.FAILED, self.return_reason)
@@ -484,7 +464,7 @@ class Behaviour:
 
     def _enter_scale(self) -> None:
         goal = self._task_goal(self.task)
-        refs = [l for l in goal if l in self.seen]
+        refs = [l for l in goal if l in self.see.seen]
         if not refs:
             self._finish(TaskState.DONE, "scale skipped: no reference in view")
             return

@@ -7,7 +7,7 @@ with the true positions:
 
 * ``interior``: a one-sided edge at the vertex whose open side is covered by other
   triangles of the complex (sampled points beside the edge on both sides lie in
-  triangles): the exception rule (fence._is_exception) missed it;
+  triangles): the exception rule (fence_local._is_exception) missed it;
 * ``crossing``: a one-sided edge at the vertex properly crosses another edge;
 * ``flip``: an edge at the vertex whose triangles' apexes lie geometrically on both sides
   while the fence's bearing test put them on one (near-collinear apex, bearing noise);
@@ -99,12 +99,13 @@ def certify_toggle(cx, fence, k):
     both ends within k hops of an odd vertex, z = z_raw XOR f. Returns (certified, ok):
     ok = boundary(chain) == z, z a cycle, f in that zone (checked here, not trusted)."""
     from coordinator.topology import certificate as C
+    from coordinator.topology.solver import _Solver
     zr = np.zeros(cx.n_edges, bool)
     zr[np.asarray(fence.z_raw, int)] = True
     if not zr.any():
         return False, True
     odd, zone = khop_zone(k)(cx, zr)
-    S = C._Solver(cx, None, {})
+    S = _Solver(cx, None, {})
     if odd.size == 0:
         chain, _ = S.solve(zr)
         return chain is not None, True
@@ -177,7 +178,6 @@ def _proper_cross(p1, p2, q1, q2):
 
 def _hops(cx):
     from scipy.sparse import csr_matrix
-    from scipy.sparse.csgraph import shortest_path
     u, v = cx.edges[:, 0], cx.edges[:, 1]
     g = csr_matrix((np.ones(2 * len(u)), (np.concatenate([u, v]), np.concatenate([v, u]))), shape=(cx.n, cx.n))
     return g

@@ -76,7 +76,7 @@ def test_hold_without_rehome_never_moves():
     beh.on_task(task("hold", vertex=3))
     run(beh, sim, ME, 20)
     sim.pose[ME][0] += 0.06
-    beh.bumped_t = beh.t                       # the push was felt
+    beh.see.bumped_t = beh.see.t                       # the push was felt
     run(beh, sim, ME, 100)
     assert abs(sim.pose[ME][0] - 0.06) < 1e-9 and abs(sim.pose[ME][1]) < 1e-9
     sim.pose[2] = [-0.9, 0.1, 0.0]
@@ -100,7 +100,7 @@ def test_hold_records_snapshot_undoes_bumps_and_ignores_a_moved_landmark():
     # a bump of 6 cm is undone
     sim.pose[ME][0] += 0.06
     sim.pose[ME][1] -= 0.03
-    beh.bumped_t = beh.t                       # the bump was felt (touch sensor)
+    beh.see.bumped_t = beh.see.t                       # the bump was felt (touch sensor)
     run(beh, sim, ME, 200)
     assert sim.dist(ME, (0, 0)) < 0.03
     # a landmark is pushed far away (a push passing by): the robot does not follow it
@@ -219,7 +219,7 @@ def test_goto_slides_along_a_wall():
     beh = Behaviour(AgentParams(), ME)
     beh.on_task(goto_task(sim, goal, timeout_s=10.0))
     touching = []
-    run(beh, sim, ME, 200, until=lambda: touching.append(bool(beh.obst)) or False)
+    run(beh, sim, ME, 200, until=lambda: touching.append(bool(beh.see.obst)) or False)
     x, y, _ = sim.pose[ME]
     assert x > 0.6 and abs(y - 0.24) < 1e-6
     assert sum(touching) > 20 and beh.status()["contact"]
@@ -241,7 +241,7 @@ def test_goto_lost_landmarks_and_timeout():
     beh.on_task(goto_task(sim, (-2.0, 0.0), timeout_s=1.0))
     assert run(beh, sim, ME, 100, until=lambda: beh.task_state != "running")
     assert beh.task_state == "failed" and beh.reason == "timeout"
-    assert 0.95 <= beh.t - beh.t0 <= 1.2
+    assert 0.95 <= beh.see.t - beh.t0 <= 1.2
 
 
 def test_leave_stops_and_idles_and_new_task_replaces_current():

@@ -787,13 +787,13 @@ def test_a_one_sided_edge_crossed_by_others_may_leave_the_target():
     one-sided with one triangle, yet three edges cross it (it lies inside the union).
     The whole zone may drop it, and certify then certifies; no closure in the narrower
     zone exists (the obstruction proves it)."""
-    from coordinator.topology import certificate as C
+    from coordinator.topology.solver import _Solver
     d, cx, eids = _end_state("truth_s1_map49_crossing.json")
     raw = eids(d["z_raw"])
     fence = SimpleNamespace(z_raw=raw, z_repair=eids(d["z_repair"]))
     zr = np.isin(np.arange(cx.n_edges), raw)
     odd, narrow = closure_zone(cx, zr, folds_only=True)
-    f, psi = C._Solver(cx, None, {}).closure(zr, odd, narrow)
+    f, psi = _Solver(cx, None, {}).closure(zr, odd, narrow)
     assert f is None and is_cocycle(cx, np.nonzero(psi)[0])
     assert not psi[narrow].any() and (psi & zr).sum() % 2 == 1
     cert = certify(cx, fence)

@@ -51,10 +51,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from .complex import Complex
-# the solver's private names stay importable from here (tests and bench/refusals.py use
-# certificate._Solver)
-from .solver import (_dedupe, _flow_witness, _forward, _lower_star_matching, _replay,  # noqa: F401
-                     _Solver, _to_int, _transpose_forms, _vertex_forest)
+from .solver import _flow_witness, _Solver
 
 __all__ = [
     "Certificate",

@@ -34,13 +34,11 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from .complex import Complex
-from .fence_deploy import _SINGLE_CLEAR, resolve_sides, robot_deployments  # noqa: F401
-from .fence_local import (_DEEP, _REFLEX, _Local, _canon, _corner, _is_exception,  # noqa: F401
-                          _reflex, _sgn, _touch_ok)
-from .fence_probes import (_tilts_todo, corner_candidates, forced_marks, plan_probes,  # noqa: F401
-                           probe_evidence)
-from .fence_sides import (_CONTACT_CONE, _FAILED_CONE, _PI3, _TOUCH_MARGIN, Room,  # noqa: F401
-                          both_touch, corner_wait_marks, find_open_sides, one_sided, test_drive_rule)
+from .fence_deploy import resolve_sides, robot_deployments
+from .fence_local import _Local
+from .fence_probes import corner_candidates, forced_marks, plan_probes, probe_evidence
+from .fence_sides import (Room, both_touch, corner_wait_marks, find_open_sides, one_sided,
+                          test_drive_rule)
 from .fence_types import Deployment, Fence, FenceEdge, FenceSide
 from .params import TopologyParams
 
