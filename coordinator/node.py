@@ -20,21 +20,23 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
 import sys
 import time
 
 import zenoh
 
 from bus.keys import Keys
-from bus.messages import ROBOT_KINDS, Clock, Complex, CoordAck, Status, WorldInfo
+from bus.messages import Clock, Status, WorldInfo
 from bus.node import run_node
 from bus.session import Mailbox, Receiver, Shutdown, publisher, query_world_info
 from bus.trust import SignedPublisher, key_from_env
 
 from .actions import Done, PublishComplex, RemoveRobot, SendTask, SpawnRobot
 from .config import CoordinatorConfig
+from .core import CoordinatorCore, TickSync, robot_kinds_from_config
 from .deployer import Deployer
+
+__all__ = ["ClockTrust", "TickSync", "main", "robot_kinds_from_config"]
 
 log = logging.getLogger("swarmcover.coordinator")
 STATUS_WAIT_S = 5.0   # lockstep: wall seconds to wait for statuses a Clock announced
@@ -85,83 +87,6 @@ class ClockTrust:
         return "bad"
 
 
-class TickSync:
-    """Lockstep book-keeping of the coordinator's half of the barrier (pure, no I/O).
-
-    ``add_status`` buffers statuses as they arrive; ``missing(clk)`` says which robots'
-    announced statuses have not arrived yet; ``take(clk)`` returns the tick's roster changes
-    and its statuses in (robot, seq) order, and forgets them. Live robots (Status.live) move
-    in real time and are in no roster: their statuses and liveliness changes
-    (``add_alive``) are handed over at the next boundary as they came.
-    """
-
-    def __init__(self):
-        self.buf: dict[int, list[Status]] = {}
-        self.have: dict[int, int] = {}      # rid -> highest seq received
-        self.done: dict[int, int] = {}      # rid -> highest seq handed to the deployer
-        self.roster: set[int] = set()
-        self.first = True
-        self.live: set[int] = set()         # robots that reported live = true
-        self.alive_events: list[tuple[int, bool]] = []
-
-    def add_alive(self, rid: int, present: bool) -> None:
-        """A liveliness change; only live robots' count (the roster stands for the rest)."""
-        if rid in self.live:
-            self.alive_events.append((rid, present))
-
-    def add_status(self, st: Status) -> None:
-        if st.live:
-            self.live.add(st.robot)
-        b = self.buf.setdefault(st.robot, [])
-        if len(b) >= 1000:
-            b.pop(0)
-        b.append(st)
-        self.have[st.robot] = max(self.have.get(st.robot, 0), st.seq)
-
-    def missing(self, clk: Clock) -> list[int]:
-        if self.first:
-            return []   # a (re)started coordinator cannot have what was sent before it
-        return [r for r, s in zip(clk.agents, clk.status_seqs)
-                if s > self.done.get(r, 0) and self.have.get(r, 0) < s]
-
-    def take(self, clk: Clock) -> tuple[list[int], list[int], list[Status]]:
-        """(left, joined, statuses) of this boundary."""
-        now = set(clk.agents)
-        left, joined = sorted(self.roster - now), sorted(now - self.roster)
-        for rid, present in self.alive_events:
-            (joined if present else left).append(rid)
-        self.alive_events = []
-        for r in left:
-            if r not in self.live:
-                self.buf.pop(r, None)
-        seqs = dict(zip(clk.agents, clk.status_seqs))
-        for r in self.live - now:
-            if self.buf.get(r):
-                seqs[r] = self.buf[r][-1].seq
-        out: list[Status] = []
-        for r, s in sorted(seqs.items()):
-            b = self.buf.get(r)
-            if not b:
-                continue
-            lo = self.done.get(r, 0)
-            out += sorted((st for st in b if lo < st.seq <= s), key=lambda st: st.seq)
-            self.buf[r] = [st for st in b if st.seq > s]
-            self.done[r] = max(lo, s)
-        self.roster = now
-        self.first = False
-        return left, joined, out
-
-
-def robot_kinds_from_config(cfg) -> callable:
-    """Robot id -> (kind, live) from [robots].kind and the live robots of [hwbridge]."""
-    default = cfg.robots.kind
-    live = {}
-    for r in cfg.section("hwbridge").get("robots", []) or []:
-        if isinstance(r, dict) and isinstance(r.get("id"), int):
-            live[r["id"]] = str(r.get("kind", "diffdrive"))
-    return lambda rid: (live[rid], True) if rid in live else (default, False)
-
-
 def load_run_config(path: str | None, info: WorldInfo | None):
     """The run config: the world's resolved one if it answered, else the file."""
     from world.config import load_config, loads_config
@@ -207,7 +132,8 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
     lockstep = ((info.mode if info is not None else cfg.world.mode) == "lockstep")
     dt = info.dt if info is not None else cfg.world.dt
     trust = ClockTrust(dt, max_rate=max(2000.0, 4.0 * cfg.world.rtf / dt))
-    sync = TickSync()
+    core = CoordinatorCore(dep)
+    sync = core.sync
     rx = Receiver(log)
     mb = Mailbox()
     subs = [
@@ -255,9 +181,9 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
                         "last tick %s): further ones are counted", clk.tick, clk.t, trust.tick)
         return verdict
 
-    def execute(actions, tick: int | None) -> None:
-        nonlocal rc
-        ack = CoordAck(tick=max(tick or 0, 0))
+    def execute(actions, ack=None) -> None:
+        """Publish the deployer's actions; in lockstep then their ack."""
+        nonlocal rc, last_ack
         for action in actions:
             match action:
                 case SendTask(robot=rid, task=task):
@@ -265,18 +191,11 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
                     if pub is None:
                         pub = task_pubs[rid] = publisher(session, keys.task(rid))
                     pub.put(task.encode())
-                    ack.task_robots.append(rid)
-                    ack.task_ids.append(task.task_id)
                 case SpawnRobot(spawn=sp):
                     log.info("spawning robot %d at source %d", sp.robot, sp.source)
                     pub_spawn.put(sp.encode())
-                    ack.spawn_ids.append(sp.robot)
-                    ack.spawn_sources.append(sp.source)
-                    ack.spawn_kinds.append(ROBOT_KINDS.index(sp.kind))
-                    ack.spawn_live.append(sp.live)
                 case RemoveRobot(remove=rm):
                     pub_remove.put(rm.encode())
-                    ack.remove_ids.append(rm.robot)
                 case PublishComplex(complex=cx):
                     pub_complex.put(cx.encode())
                     log.info("cycle %d: robots %d, complex %d vertices / %d edges / %d "
@@ -292,24 +211,15 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
                     rc = 0 if ok else 1
                 case _:
                     raise TypeError(f"unknown deployer action {action!r}")
-        if tick is not None:
-            nonlocal last_ack
-            last_ack = (tick, ack.encode())
+        if ack is not None:
+            last_ack = (ack.tick, ack.encode())
             pub_ack.put(last_ack[1])
 
     def boundary(clk: Clock) -> None:
-        """Lockstep: the deployer's step of tick clk.tick, on that tick's roster changes
-        and statuses alone."""
+        """Lockstep: the deployer's step of tick clk.tick (CoordinatorCore.boundary)."""
         nonlocal busy_s, ticks
         t0 = time.monotonic()
-        left, joined, statuses = sync.take(clk)
-        for rid in left:
-            dep.on_alive(rid, False, clk.t)
-        for rid in joined:
-            dep.on_alive(rid, True, clk.t)
-        for st in statuses:
-            dep.on_status(st)
-        execute(dep.step(clk.t), clk.tick)
+        execute(*core.boundary(clk))
         if dep.done and not args.exit_on_done:
             dep.reopen_if_needed(clk.t)
         busy_s += time.monotonic() - t0
@@ -378,7 +288,7 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
                 continue
             if not clocked:
                 continue  # the deployer's time is the world's: wait for its clock
-            execute(dep.step(now), None)
+            execute(dep.step(now))
             if dep.done and not args.exit_on_done:
                 dep.reopen_if_needed(now)
     finally:

@@ -50,30 +50,20 @@ import numpy as np
 import zenoh
 
 from bus.keys import Keys
-from bus.messages import (ROBOT_KINDS, Clock, CmdVel, CoordAck, Pose, Remove, Sense, Spawn,
-                          Truth, TwinCmd, WorldInfo)
+from bus.messages import CmdVel, CoordAck, Pose, Remove, Spawn, Truth, TwinCmd, WorldInfo
 from bus.node import run_node
 from bus.session import Mailbox, Receiver, add_zenoh_args, publisher
 
 from .clock import LockstepGate, Pacer, RtfMeter
 from .config import ConfigError, RunConfig, load_config, to_toml, with_sources
+from .core import SpawnRefused, WorldCore, join_ticks
 from .maps import WorldMap, build_map
-from .physics import Physics
-from .sensing import Sensors
 
 ABSURD_FACTOR = 10.0   # commands faster than this times the limit are dropped, not clamped
-JOIN_S = 0.05          # lockstep barrier: a spawned body's agent takes part this many sim
-                       # seconds (at least one tick) after the body appears; that tick waits
-                       # for its process to start. 1.0 s cost idle ticks, not less wall time,
-                       # and more cycles (corridor_doors seed 0 in-process: > 64 cycles and
-                       # 940 s sim unfinished, against 103 cycles and 859 s at one tick)
 JOIN_TIMEOUT_S = 30.0  # wall seconds a joining tick waits for a new agent's first command
 COORD_TIMEOUT_S = 60.0  # wall seconds a tick waits for the coordinator's ack
 
-
-def join_ticks(dt: float) -> int:
-    """Ticks between a body's spawn and its agent's first Sense (lockstep barrier)."""
-    return max(1, round(JOIN_S / dt))
+__all__ = ["WorldNode", "join_ticks", "main"]
 
 
 class WorldNode:
@@ -84,25 +74,15 @@ class WorldNode:
                  record_truth: bool = False, await_coordinator_s: float = 0.0):
         self.cfg, self.wm, self.s, self.keys, self.log = cfg, wm, session, keys, log
         w = cfg.world
+        self.core = core = WorldCore(cfg, wm)
         self.dt = w.dt
         self.lockstep = w.mode == "lockstep"
         self.max_ticks = max_ticks
-        self.rng = np.random.default_rng(w.seed)
-        self.physics = Physics(wm, radius=cfg.robots.radius, v_max=cfg.robots.v_max,
-                               w_max=cfg.robots.w_max, dt=w.dt, substeps=w.substeps,
-                               actuation_noise=cfg.robots.actuation_noise, rng=self.rng)
-        sc = cfg.sensing
-        self.sensors = Sensors(wm, cfg.rv, radius=cfg.robots.radius,
-                               noise_sigma=math.radians(sc.noise_deg), dropout=sc.dropout,
-                               robots_occlude=sc.robots_occlude, n_touch=sc.n_touch,
-                               skin=sc.touch_skin, rng=self.rng)
-        self.sense_every = max(1, round(1.0 / (sc.rate_hz * w.dt)))
+        self.physics, self.sensors = core.physics, core.sensors
         self.odom_every = max(1, round(1.0 / (w.pose_rate_hz * w.dt))) if w.pose_rate_hz > 0 \
             else 0
-        self.tick = 0
         self.cmds: dict[int, tuple] = {}       # rid -> (vx, vy, wz, sim t, tick)
         self.twin_cmds: dict[int, tuple] = {}  # rid -> (vx, vy, wz, sim t)
-        self.agents: set[int] = set()          # ids with a liveliness token
         self.pubs: dict[int, tuple] = {}       # rid -> (sense, odom) publishers
         self.pending: list = []                # Spawn / Remove messages, arrival order
         self.last_sense: dict[int, bytes] = {}
@@ -123,14 +103,7 @@ class WorldNode:
         self._token = None
         self._info_bytes = b""
         self._clock_pub = self._truth_pub = None
-        # lockstep roster and the coordinator barrier
-        self.roster: set[int] = set()          # agents taking part (waited for, in Clock)
-        self.gone: set[int] = set()            # tokens that vanished since the boundary
-        self.joins: dict[int, int] = {}        # body spawned by an ack -> tick it joins
-        self.joined: set[int] = set()          # joiners that answered their first tick
-        self.join_ticks = join_ticks(self.dt)
-        self.status_seq: dict[int, int] = {}   # rid -> seq announced by its last command
-        self.task_last: dict[int, int] = {}    # rid -> last task id an ack announced
+        # the coordinator barrier (the roster is the core's)
         self.coord_present = False             # coordinator liveliness token
         self.coord_in = False                  # coordinator in the barrier
         self.coord_join = False                # ... from the next boundary
@@ -152,7 +125,7 @@ class WorldNode:
         # Taken before the liveliness subscriber exists (with one declared, the get was seen
         # answering from the still-empty local cache); the subscriber's history covers any
         # token that appears in between.
-        self.agents |= self.alive_snapshot() or set()
+        self.core.agents |= self.alive_snapshot() or set()
         for key in (f"{k.prefix}/robot/*/cmd_vel", f"{k.prefix}/robot/*/twin_cmd", k.spawn,
                     k.remove, k.coord_ack):
             self._subs.append(s.declare_subscriber(key, cb))
@@ -171,7 +144,7 @@ class WorldNode:
         self._info_bytes = info.validate().encode()
         self._queryable = s.declare_queryable(k.world_info)
         self._token = s.liveliness().declare_token(k.alive("world", "main"))
-        self.log.debug("agents present at start: %s", sorted(self.agents))
+        self.log.debug("agents present at start: %s", sorted(self.core.agents))
 
     def alive_snapshot(self) -> set[int] | None:
         """Robot ids whose liveliness token is present now (None if the query failed)."""
@@ -235,13 +208,10 @@ class WorldNode:
                 rid = self.keys.robot_id(key)
                 if rid is None:
                     return
-                if kind == zenoh.SampleKind.DELETE:
-                    self.agents.discard(rid)
+                gone = kind == zenoh.SampleKind.DELETE
+                self.core.alive(rid, not gone)
+                if gone:
                     self.gate.forget(rid)
-                    self.gone.add(rid)
-                else:
-                    self.agents.add(rid)
-                    self.gone.discard(rid)
             elif rel.startswith("alive/coordinator/"):
                 self._on_coordinator(kind != zenoh.SampleKind.DELETE)
             elif rel == "coord/ack":
@@ -276,12 +246,7 @@ class WorldNode:
     def _on_ack(self, m: CoordAck) -> None:
         """The coordinator's decisions of tick m.tick: tasks are announced to their robots
         in the Senses after the next boundary, spawns/removes applied at it."""
-        for rid, tid in zip(m.task_robots, m.task_ids):
-            self.task_last[rid] = tid
-        ops: list = [Spawn(robot=r, source=src, kind=ROBOT_KINDS[kd], live=lv)
-                     for r, src, kd, lv in zip(m.spawn_ids, m.spawn_sources, m.spawn_kinds,
-                                               m.spawn_live)]
-        ops += [Remove(robot=r, reason="coordinator") for r in m.remove_ids]
+        ops = self.core.on_ack(m)
         fresh = m.tick == self.tick and self.acked < m.tick
         for op in ops:
             tag = ("spawn" if isinstance(op, Spawn) else "remove", op.robot)
@@ -336,9 +301,8 @@ class WorldNode:
             if m.tick != -1 and m.tick < self.gate.tick:
                 self.drops["late command"] += 1
             else:
-                if (self.gate.answer(rid, m.tick) and m.status_seq >= 0
-                        and rid in self.gate.expected):
-                    self.status_seq[rid] = m.status_seq
+                if self.gate.answer(rid, m.tick) and rid in self.gate.expected:
+                    self.core.answered(rid, m.status_seq)
                 if self._t_answered is None and self.gate.all_answered():
                     self._t_answered = time.monotonic()
 
@@ -361,7 +325,7 @@ class WorldNode:
         for m, join in acked:
             self._apply_op(m, "coord/ack")
             if join and isinstance(m, Spawn) and not m.live and self.physics.has(m.robot):
-                self.joins[m.robot] = self.tick + self.join_ticks
+                self.core.join_later(m.robot)
         for m in ops:
             self._apply_op(m, "world/spawn" if isinstance(m, Spawn) else "world/remove")
 
@@ -369,33 +333,21 @@ class WorldNode:
         if isinstance(m, Spawn):
             self._spawn(m.robot, m.source, m.kind, m.live, None, where)
         else:
-            if self.physics.remove(m.robot):
+            if self.core.remove(m.robot):
                 self._undeclare_pubs(m.robot)
                 self.cmds.pop(m.robot, None)
                 self.twin_cmds.pop(m.robot, None)
                 self.last_sense.pop(m.robot, None)
                 self.gate.forget(m.robot)
-                self.roster.discard(m.robot)
-                self.joins.pop(m.robot, None)
-                self.status_seq.pop(m.robot, None)
                 self.log.info("removed robot %d (%s)", m.robot, m.reason or "no reason")
             else:
                 self._drop(self.keys.remove, "remove of an unknown robot", str(m.robot))
 
     def _spawn(self, rid, source, kind, live, pose, where) -> bool:
-        if self.physics.has(rid):
-            self._drop(where, "spawn of an existing robot", str(rid))
-            return False
-        if pose is None:
-            if source >= len(self.wm.sources):
-                self._drop(where, "spawn at an unknown source",
-                           f"source {source}, {len(self.wm.sources)} source(s)")
-                return False
-            pose = tuple(self.wm.sources[source])
         try:
-            x, y, th = self.physics.add(rid, pose[0], pose[1], pose[2], kind, live)
-        except ValueError as e:
-            self._drop(where, "spawn failed", str(e))
+            x, y, th = self.core.add(rid, source, kind, live, pose)
+        except SpawnRefused as e:
+            self._drop(where, e.reason, e.detail)
             return False
         self._declare_pubs(rid)
         self.log.info("spawned robot %d (%s%s) at (%.3f, %.3f, %.3f)", rid, kind,
@@ -415,6 +367,7 @@ class WorldNode:
 
     def advance(self) -> None:
         """Apply commands, step dt, apply spawns/removes, publish the new tick."""
+        core = self.core
         if self.lockstep:
             late = self.gate.late()
             if late:
@@ -428,15 +381,15 @@ class WorldNode:
                 # an agent whose token vanished unseen must not stall every tick
                 alive = self.alive_snapshot()
                 if alive is not None:
-                    self.agents -= late - alive
-                    self.gone |= late - alive
-                for rid in late & set(self.joins):   # a new agent that never came
-                    self.joins.pop(rid)
+                    for rid in late - alive:
+                        self.core.alive(rid, False)
+                for rid in late & set(core.joins):   # a new agent that never came
+                    core.joins.pop(rid)
                     self.log.warning("tick %d: robot %d's agent did not start within %.0f s; "
                                      "it takes part once it answers (not repeatable)",
                                      self.tick, rid, JOIN_TIMEOUT_S)
-            self.joined |= self.gate.answered & set(self.joins)
-            if self.gate.expected & set(self.joins):
+            core.joined |= self.gate.answered & set(core.joins)
+            if self.gate.expected & set(core.joins):
                 self.join_wait_s += time.monotonic() - self.gate.opened
             if self._t_acked is not None:
                 self.coord_wait_s += max(0.0, self._t_acked - (self._t_answered
@@ -448,31 +401,20 @@ class WorldNode:
                 self.log.warning("tick %d: no ack from the coordinator within %.0f s: ticks "
                                  "no longer wait for it (not repeatable from here)",
                                  self.tick, COORD_TIMEOUT_S)
-        ids = self.physics.ids
-        self.physics.step(self._commands(ids))
-        self.tick += 1
+        core.step(self._commands(self.physics.ids))
         self._apply_pending()
         self.publish_tick()
 
     def _boundary(self, live: list[bool], ids: list[int]) -> None:
-        """Lockstep roster at a tick boundary: deaths, joins, agents that appeared."""
-        for rid in self.gone:
-            self.roster.discard(rid)
-            self.joins.pop(rid, None)
-        self.gone = set()
-        for rid in self.joined:
-            if self.joins.pop(rid, None) is not None:
-                self.roster.add(rid)
-        self.joined = set()
-        virtual = {r for k, r in enumerate(ids) if not live[k]}
-        self.roster |= {r for r in self.agents & virtual if r not in self.joins}
-        self.roster &= virtual
+        """Lockstep roster at a tick boundary (the core's), and the coordinator joining."""
+        self.core.boundary(live, ids)
         if self.coord_join and self.coord_present:
             self.coord_in, self.coord_join = True, False
             self.log.info("tick %d: the coordinator joins the barrier", self.tick)
 
     def publish_tick(self) -> None:
-        t = self.tick * self.dt
+        core = self.core
+        t = core.t
         now = time.monotonic()
         self.meter.add(t, now)
         ids, pos, th = self.physics.state()
@@ -486,11 +428,7 @@ class WorldNode:
                                    "theta": th.tolist()})
         if self.lockstep:
             self._boundary(live, list(ids))
-        roster = sorted(self.roster)
-        self._clock_bytes = Clock(tick=self.tick, t=t, mode=self.cfg.world.mode,
-                                  rtf=min(self.meter.rtf, 1e6), agents=roster,
-                                  status_seqs=[self.status_seq.get(r, 0) for r in roster]
-                                  ).encode()
+        self._clock_bytes = core.clock(self.cfg.world.mode, min(self.meter.rtf, 1e6)).encode()
         self._clock_pub.put(self._clock_bytes)
         if self.odom_every and self.tick % self.odom_every == 0:
             for k, rid in enumerate(ids):
@@ -500,29 +438,23 @@ class WorldNode:
                                                source="sim").encode())
         expected: set[int] = set()
         if self.lockstep:
-            self.has_agents = bool(self.roster or self.joins)
+            self.has_agents = bool(core.roster or core.joins)
         else:
-            self.has_agents = any(not live[k] and r in self.agents for k, r in enumerate(ids))
-        if self.tick % self.sense_every == 0 and ids:
-            self._publish_sense(ids, pos, th, t)
+            self.has_agents = any(not live[k] and r in core.agents for k, r in enumerate(ids))
+        if core.sense_due() and ids:
+            self._publish_sense(ids, pos, th)
             if self.lockstep:
-                expected = self.roster | {r for r, j in self.joins.items() if j <= self.tick}
+                expected = core.expected()
             else:
-                expected = {r for k, r in enumerate(ids) if not live[k] and r in self.agents}
+                expected = {r for k, r in enumerate(ids) if not live[k] and r in core.agents}
         self.gate.open(self.tick, expected, now)
         self.last_send = now
 
-    def _publish_sense(self, ids, pos, th, t) -> None:
-        per = self.sensors.sense(pos, th).lists(ids)
+    def _publish_sense(self, ids, pos, th) -> None:
         self.last_sense = {}
-        barrier = self.coord_in
-        for k, rid in enumerate(ids):
-            if self.joins.get(rid, -1) > self.tick:
-                continue  # its agent takes part from its join tick on
-            data = Sense(robot=rid, tick=self.tick, t=t, **per[k],
-                         task_id=self.task_last.get(rid, 0) if barrier else -1).encode()
-            self.last_sense[rid] = data
-            self.pubs[rid][0].put(data)
+        for sense in self.core.senses(ids, pos, th, barrier=self.coord_in):
+            data = self.last_sense[sense.robot] = sense.encode()
+            self.pubs[sense.robot][0].put(data)
 
     def _resend(self, now: float) -> None:
         for rid in sorted(self.gate.waiting):
@@ -543,7 +475,7 @@ class WorldNode:
         if not g.timed_out(now):
             return False
         # a new agent's process may still be starting: its joining tick waits longer
-        return not (g.waiting & set(self.joins)) or now - g.opened >= JOIN_TIMEOUT_S
+        return not (g.waiting & set(self.core.joins)) or now - g.opened >= JOIN_TIMEOUT_S
 
     def serve_queries(self) -> None:
         q = self._queryable
@@ -627,6 +559,10 @@ class WorldNode:
             item = self.mail.get(self.wait_time(now))
             if item is not None:
                 self.handle(item)
+
+    @property
+    def tick(self) -> int:
+        return self.core.tick
 
     def summary(self) -> dict:
         return {"ticks": self.tick, "t": self.tick * self.dt, "robots": len(self.physics.ids),
