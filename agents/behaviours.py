@@ -28,7 +28,7 @@ import math
 from dataclasses import dataclass
 from enum import StrEnum
 
-from bus.messages import Sense, Status, Task
+from swarmcover.bus.messages import Sense, Status, Task
 
 from .control import FrameTracker, circmean, clamp_speed, diffdrive, slide, wrap
 from .modes import MOVING_MODES, Context, Home, Idle, Mode, ModeState, Outcome, Phase, Record, Tick

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from typing import Iterable, Mapping, Sequence
 
-from ground.angles import PI, circmean, resultant, wrap  # noqa: F401  (re-exported)
+from swarmcover.ground.angles import PI, circmean, resultant, wrap  # noqa: F401  (re-exported)
 
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import logging
 
-from bus.messages import Sense, Status
+from swarmcover.bus.messages import Sense, Status
 
 from .behaviours import Behaviour, Command
 from .params import AgentParams

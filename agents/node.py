@@ -29,10 +29,10 @@ import sys
 import time
 from pathlib import Path
 
-from bus.keys import Keys
-from bus.messages import CmdVel, Pose, Sense, Task
-from bus.node import ready, run_node
-from bus.session import (Mailbox, Receiver, Shutdown, add_zenoh_args, publisher, query_world_info,
+from swarmcover.bus.keys import Keys
+from swarmcover.bus.messages import CmdVel, Pose, Sense, Task
+from swarmcover.bus.node import ready, run_node
+from swarmcover.bus.session import (Mailbox, Receiver, Shutdown, add_zenoh_args, publisher, query_world_info,
                          undeclare)
 
 from .core import AgentCore
@@ -72,7 +72,7 @@ def world_mode(args, session, keys: Keys, stop: Shutdown, log: logging.Logger) -
     try:
         if args.run_config:
             import tomllib
-            from world.config import WorldConfig
+            from swarmcover.world.config import WorldConfig
             raw = tomllib.loads(Path(args.run_config).read_text())
             return str(raw.get("world", {}).get("mode", WorldConfig().mode))
         if args.info_timeout > 0:

@@ -13,8 +13,8 @@ import tomllib
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from bus.configcheck import Checker, ConfigError
-from bus.messages import ROBOT_KINDS  # the wire's list, re-exported for agents.node
+from swarmcover.bus.configcheck import Checker, ConfigError
+from swarmcover.bus.messages import ROBOT_KINDS  # the wire's list, re-exported for agents.node
 
 
 class ParamError(ConfigError):

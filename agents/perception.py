@@ -10,7 +10,7 @@ All bearings are in the body frame (rad, CCW, 0 = forward); distances in m, time
 """
 from __future__ import annotations
 
-from bus.messages import Sense
+from swarmcover.bus.messages import Sense
 
 from .control import FrameTracker, circmean, unit, wrap
 

@@ -15,7 +15,7 @@ import argparse
 import signal
 import sys
 
-from bus.session import Shutdown, setup_logging
+from swarmcover.bus.session import Shutdown, setup_logging
 
 from .supervisor import Supervisor
 

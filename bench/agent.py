@@ -37,8 +37,8 @@ from bench.common import CLK, cpu_seconds, eprint, router_and_starter, wait_line
 
 def echo_main(argv) -> int:
     """The baseline: a bare Zenoh client answering each Sense with a fixed CmdVel."""
-    from bus.messages import CmdVel
-    from bus.session import (Mailbox, Shutdown, add_zenoh_args, keys_from_args, open_session,
+    from swarmcover.bus.messages import CmdVel
+    from swarmcover.bus.session import (Mailbox, Shutdown, add_zenoh_args, keys_from_args, open_session,
                              publisher)
     ap = argparse.ArgumentParser()
     ap.add_argument("--echo", action="store_true")
@@ -80,7 +80,7 @@ class Model:
         return {l: math.atan2(py - y, px - x) for l, (px, py) in self.lms.items()}
 
     def sense(self, rid, tick, t):
-        from bus.messages import Sense
+        from swarmcover.bus.messages import Sense
         b = self.bearings_at(self.x, self.y)
         ids = list(b)
         return Sense(robot=rid, tick=tick, t=t, ids=ids, bearings=[b[i] for i in ids],
@@ -95,7 +95,7 @@ class Model:
 
 def drive(session, keys, mailbox, model, n, rate_hz, t0, tick0, goto_every=0):
     """Send n Sense ticks to robots 0 and 1 in lockstep; returns the next tick and time."""
-    from bus.messages import CmdVel, Task, decode
+    from swarmcover.bus.messages import CmdVel, Task, decode
     dt = 0.05
     period = 1.0 / rate_hz if rate_hz else 0.0
     nxt = time.monotonic()
@@ -135,9 +135,9 @@ def drive(session, keys, mailbox, model, n, rate_hz, t0, tick0, goto_every=0):
 
 def split(n: int) -> dict:
     """CPU microseconds per message an agent spends decoding, stepping and encoding."""
-    from agents.behaviours import Behaviour
-    from agents.params import AgentParams
-    from bus.messages import CmdVel, Sense, Task, decode
+    from swarmcover.agents.behaviours import Behaviour
+    from swarmcover.agents.params import AgentParams
+    from swarmcover.bus.messages import CmdVel, Sense, Task, decode
     clock = time.process_time
     out = {}
     for name, goto_every in (("hold", 0), ("goto", 60)):
@@ -181,9 +181,9 @@ def main(argv=None) -> int:
     ap.add_argument("--split-n", type=int, default=3000,
                     help="messages per phase of the in-process split (0: skip)")
     args = ap.parse_args(argv)
-    from bus.keys import Keys
-    from bus.messages import Task
-    from bus.session import Mailbox, add_zenoh_args, open_session
+    from swarmcover.bus.keys import Keys
+    from swarmcover.bus.messages import Task
+    from swarmcover.bus.session import Mailbox, add_zenoh_args, open_session
 
     swarm = f"bench{os.getpid()}"
     py = sys.executable

@@ -20,7 +20,7 @@ agent's USS minus the session's is what the agent's own code and state hold.
 It also reports the import side, in fresh interpreters: how many modules ``import
 agents.node`` loads, which heavy libraries (numpy, scipy, pymunk, matplotlib, PIL) it pulls
 in (and which are mapped in the live agents, from /proc/<pid>/maps), and its import cost:
-``-X importtime`` wall time and the CPU time of ``python -c "import agents.node"`` minus
+``-X importtime`` wall time and the CPU time of ``python -c "import swarmcover.agents.node"`` minus
 that of ``python -c pass``, each the best of a few tries (the box is shared, the best is the
 least disturbed). Every child runs with a bytecode cache in a temporary directory
 (PYTHONPYCACHEPREFIX), as a deployed install has, even if PYTHONDONTWRITEBYTECODE is set;
@@ -56,7 +56,7 @@ HEAVY = ("numpy", "scipy", "pymunk", "matplotlib", "PIL", "shapely", "networkx")
 _PROBE = """
 import sys
 base = set(sys.modules)
-import agents.node
+import swarmcover.agents.node
 new = sorted(set(sys.modules) - base)
 print("\\t".join(new))
 """
@@ -99,7 +99,7 @@ def _child_cpu_s(argv, env) -> float:
 def import_profile(py: str, env: dict, tries: int) -> dict:
     """Modules ``import agents.node`` adds, and its import cost (best of ``tries``)."""
     # fill the bytecode cache with what an agent started by `run` imports
-    subprocess.run([py, "-c", "import swarmcover.cli, agents.node, world.config"], env=env,
+    subprocess.run([py, "-c", "import swarmcover.cli, swarmcover.agents.node, swarmcover.world.config"], env=env,
                    cwd=str(ROOT), timeout=60, check=True)
     r = subprocess.run([py, "-c", _PROBE], capture_output=True, text=True, env=env,
                        cwd=str(ROOT), timeout=60, check=True)
@@ -107,12 +107,12 @@ def import_profile(py: str, env: dict, tries: int) -> dict:
     tops = sorted({m.split(".")[0] for m in mods})
     wall, cpu_imp, cpu_bare = [], [], []
     for _ in range(tries):
-        r = subprocess.run([py, "-X", "importtime", "-c", "import agents.node"],
+        r = subprocess.run([py, "-X", "importtime", "-c", "import swarmcover.agents.node"],
                            capture_output=True, text=True, env=env, cwd=str(ROOT),
                            timeout=60, check=True)
-        last = [ln for ln in r.stderr.splitlines() if ln.rstrip().endswith("| agents.node")]
+        last = [ln for ln in r.stderr.splitlines() if ln.rstrip().endswith("| swarmcover.agents.node")]
         wall.append(int(last[-1].split("|")[1]) / 1000.0)
-        cpu_imp.append(_child_cpu_s([py, "-c", "import agents.node"], env))
+        cpu_imp.append(_child_cpu_s([py, "-c", "import swarmcover.agents.node"], env))
         cpu_bare.append(_child_cpu_s([py, "-c", "pass"], env))
     return {"modules_added": len(mods), "top_level_packages": tops,
             "heavy_imported": [h for h in HEAVY if h in tops],
@@ -123,7 +123,7 @@ def import_profile(py: str, env: dict, tries: int) -> dict:
 
 _SESSION_ONLY = """
 import argparse, sys, time
-from bus.session import add_zenoh_args, open_session
+from swarmcover.bus.session import add_zenoh_args, open_session
 p = argparse.ArgumentParser()
 add_zenoh_args(p)
 s = open_session(p.parse_args(sys.argv[1:]))

@@ -36,9 +36,9 @@ from scipy.spatial import cKDTree
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from world.config import load_config  # noqa: E402
-from world.groundtruth import euler_bound, ideal_count, ring_lengths  # noqa: E402,F401
-from world.maps import build_map  # noqa: E402
+from swarmcover.world.config import load_config  # noqa: E402
+from swarmcover.world.groundtruth import euler_bound, ideal_count, ring_lengths  # noqa: E402,F401
+from swarmcover.world.maps import build_map  # noqa: E402
 
 TRI = math.sqrt(3) / 2
 

@@ -44,7 +44,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from hwbridge import ros2 as r  # noqa: E402
+from swarmcover.hwbridge import ros2 as r  # noqa: E402
 from swarmcover.ros2 import typestore  # noqa: E402
 
 TWIST = "geometry_msgs/msg/Twist"

@@ -43,12 +43,12 @@ def _free_port() -> int:
 
 
 def run_inproc(config: str, seed: int, timeout: float, overrides: dict | None = None) -> dict:
-    from bus.messages import Truth
+    from swarmcover.bus.messages import Truth
     from swarmcover.run import compute_summary
     from swarmcover.simloop import SimLoop
-    from world.config import load_config
+    from swarmcover.world.config import load_config
     from swarmcover.run import default_robots_max
-    from world.maps import build_map
+    from swarmcover.world.maps import build_map
     cfg = load_config(config)
     cfg, _, limits = default_robots_max(cfg, build_map(cfg), "")  # as `run` does
     sim = SimLoop(cfg, seed=seed, coordinator_overrides=overrides)

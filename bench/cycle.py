@@ -55,12 +55,12 @@ if str(ROOT) not in sys.path:
 
 from bench.oracle import PolyMap  # noqa: E402
 from bench.truth import RV, Swarm, _rect  # noqa: E402
-from bus.messages import Status  # noqa: E402
-from coordinator import build_complex, certify, detect_fence, find_redundant, plan_pushes  # noqa: E402
-from coordinator.actions import SendTask  # noqa: E402
-from coordinator.config import CoordinatorConfig  # noqa: E402
-from coordinator.deployer import Deployer  # noqa: E402
-from coordinator.planner import (  # noqa: E402
+from swarmcover.bus.messages import Status  # noqa: E402
+from swarmcover.coordinator import build_complex, certify, detect_fence, find_redundant, plan_pushes  # noqa: E402
+from swarmcover.coordinator.actions import SendTask  # noqa: E402
+from swarmcover.coordinator.config import CoordinatorConfig  # noqa: E402
+from swarmcover.coordinator.deployer import Deployer  # noqa: E402
+from swarmcover.coordinator.planner import (  # noqa: E402
     _claimed,
     _place_on_lattice,
     _reports,

@@ -232,7 +232,7 @@ def invalid_payloads(cls, n: int, rng: random.Random, decode_check=True) -> list
     truncated and bit-flipped valid messages, msgpack junk, wrong tag/version, wrong-typed,
     non-finite or out-of-range fields, missing fields, mismatched list lengths.
     ``cls=None`` (a non-msgpack topic): random bytes only."""
-    from bus.messages import REGISTRY, WireError, decode
+    from swarmcover.bus.messages import REGISTRY, WireError, decode
     out: list[bytes] = []
     base = None
     if cls is not None:
@@ -399,7 +399,7 @@ def clocked_config(config: str, work: Path, realtime: bool, rtf: float = 1.0) ->
         return config
     import tomllib
 
-    from ground.toml import dumps_toml
+    from swarmcover.ground.toml import dumps_toml
     src = (ROOT / config) if not Path(config).is_absolute() else Path(config)
     raw = tomllib.loads(src.read_text())
     raw.setdefault("world", {}).update(mode="realtime", rtf=float(rtf))
@@ -555,7 +555,7 @@ FUZZ_CONFIG = "configs/mixed.toml"
 def fuzz_targets(keys, live_ids=(1, 2)) -> list[tuple[str, object]]:
     """(key, message class or None) for every topic a process subscribes to; None: raw
     (ROS 2 CDR) keys."""
-    from bus import messages as m
+    from swarmcover.bus import messages as m
     rid = 0
     out = [(keys.sense(rid), m.Sense), (keys.cmd_vel(rid), m.CmdVel), (keys.odom(rid), m.Pose),
            (keys.pose(rid), m.Pose), (keys.status(rid), m.Status), (keys.task(rid), m.Task),
@@ -598,7 +598,7 @@ def send_fuzz(session, targets, per_topic: int, seed: int = 0, progress=None,
         pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
         payloads = invalid_payloads(cls, min(per_topic, 2000), rng)
         if cls is None:   # ROS 2 CDR: keep payloads a Twist decoder must refuse
-            from hwbridge.ros2 import CdrError, decode_twist
+            from swarmcover.hwbridge.ros2 import CdrError, decode_twist
             ok = []
             for p in payloads:
                 try:
@@ -737,7 +737,7 @@ def fuzz_campaign(work: Path, per_topic: int) -> dict:
     """Fuzz every topic of a mixed live/virtual set-up; report crashes and drop counters."""
     import uuid
 
-    from bus.keys import Keys
+    from swarmcover.bus.keys import Keys
     work.mkdir(parents=True, exist_ok=True)
     router = Router(free_port(), log=work / "router.log").start()
     swarm = "fz" + uuid.uuid4().hex[:6]
@@ -757,7 +757,7 @@ def fuzz_campaign(work: Path, per_topic: int) -> dict:
         time.sleep(6.0)
         import argparse as _a
 
-        from bus.session import add_zenoh_args, open_session
+        from swarmcover.bus.session import add_zenoh_args, open_session
         p = _a.ArgumentParser()
         add_zenoh_args(p)
         s = open_session(p.parse_args(zargs))

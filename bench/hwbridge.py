@@ -36,10 +36,10 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from bench.common import cpu_seconds, eprint, free_port, wait_line  # noqa: E402
-from hwbridge.fake_robot import DiffDriveSim, DriveParams  # noqa: E402
-from ground.angles import wrap  # noqa: E402
-from hwbridge.metrics import TrackLog  # noqa: E402
-from hwbridge.twin import TwinGains, VelocityEstimator, integrate, twin_command  # noqa: E402
+from swarmcover.hwbridge.fake_robot import DiffDriveSim, DriveParams  # noqa: E402
+from swarmcover.ground.angles import wrap  # noqa: E402
+from swarmcover.hwbridge.metrics import TrackLog  # noqa: E402
+from swarmcover.hwbridge.twin import TwinGains, VelocityEstimator, integrate, twin_command  # noqa: E402
 
 
 def waypoint_command(pose, goal, v_max=0.25):
@@ -172,8 +172,8 @@ class Procs:
 
 
 def procs_run(feedforward: bool, seconds: float, seed: int = 0) -> dict:
-    from bus.keys import Keys
-    from bus.messages import CmdVel, Pose, decode
+    from swarmcover.bus.keys import Keys
+    from swarmcover.bus.messages import CmdVel, Pose, decode
     sys.path.insert(0, str(ROOT / "tests"))
     from procs import client_session
 

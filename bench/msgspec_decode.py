@@ -36,7 +36,7 @@ import msgpack
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from bus import messages as m  # noqa: E402
+from swarmcover.bus import messages as m  # noqa: E402
 
 
 def _old_encode(msg: m.Message) -> bytes:

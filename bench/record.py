@@ -32,8 +32,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from bench.common import eprint, free_port  # noqa: E402
-from bus import messages as m  # noqa: E402
-from bus.keys import Keys  # noqa: E402
+from swarmcover.bus import messages as m  # noqa: E402
+from swarmcover.bus.keys import Keys  # noqa: E402
 
 
 def payloads(keys: Keys, n: int) -> list[tuple[str, bytes]]:
@@ -75,7 +75,7 @@ def bench_sink(items, tmp: Path) -> dict:
 def _session(endpoint: str):
     import argparse as ap
 
-    from bus.session import add_zenoh_args, open_session
+    from swarmcover.bus.session import add_zenoh_args, open_session
     p = ap.ArgumentParser()
     add_zenoh_args(p)
     return open_session(p.parse_args(["--connect", endpoint]))
@@ -102,7 +102,7 @@ def _deliver(pub_s, items, done, timeout=120.0) -> float:
 
 
 def bench_recorder(items, keys: Keys, tmp: Path) -> dict:
-    from bus.session import Mailbox
+    from swarmcover.bus.session import Mailbox
     from swarmcover.record import Recorder
     port = free_port()
     router = subprocess.Popen([sys.executable, "-m", "swarmcover", "router", "--listen",
@@ -147,7 +147,7 @@ def bench_plot_load(tmp: Path, cycles: int = 200) -> dict:
     from swarmcover.record import McapSink
     from swarmcover.replay import read_messages
     from swarmcover.plot import load_run
-    from viz.synth import Scenario
+    from swarmcover.viz.synth import Scenario
     k = Keys("bench")
     sc = Scenario(n_max=60)
     path = tmp / "run.mcap"
@@ -181,7 +181,7 @@ def bench_writers(items, tmp: Path, scenes: int = 200) -> dict:
 
     from swarmcover.record import McapSink, payload_to_json, schema_bytes
     from swarmcover.scene import SCENE_TOPIC, SceneState, scene_schema
-    from viz.synth import Scenario
+    from swarmcover.viz.synth import Scenario
     sc = Scenario(n_max=60)
     st = SceneState()
     st.on_message(sc.info)

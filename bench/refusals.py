@@ -46,8 +46,7 @@ VARIANTS = ("k1", "k2", "k3", "all", "k1t", "k2t")
 
 def grow(seed: int, idx: int, **kw):
     """(row, swarm, cx, fence) of map idx: truth.run_map with its end state kept."""
-    import coordinator
-
+    import swarmcover.coordinator as coordinator
     box: dict = {}
     real_certify = coordinator.certify
     RealSwarm = truth.Swarm
@@ -98,8 +97,8 @@ def certify_toggle(cx, fence, k):
     """The 'toggle' variant: the closure f may also remove target edges, f any edge with
     both ends within k hops of an odd vertex, z = z_raw XOR f. Returns (certified, ok):
     ok = boundary(chain) == z, z a cycle, f in that zone (checked here, not trusted)."""
-    from coordinator.topology import certificate as C
-    from coordinator.topology.solver import _Solver
+    from swarmcover.coordinator.topology import certificate as C
+    from swarmcover.coordinator.topology.solver import _Solver
     zr = np.zeros(cx.n_edges, bool)
     zr[np.asarray(fence.z_raw, int)] = True
     if not zr.any():
@@ -134,7 +133,7 @@ def _ball(cx, odd, k):
 
 
 def certify_with(cx, fence, variant: str):
-    from coordinator.topology import certificate as C
+    from swarmcover.coordinator.topology import certificate as C
     if variant.endswith("t"):
         ok, good = certify_toggle(cx, fence, int(variant[1]))
         return type("C", (), {"certified": ok})(), good

@@ -24,7 +24,7 @@ from scipy.spatial import cKDTree
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from coordinator import (  # noqa: E402
+from swarmcover.coordinator import (  # noqa: E402
     Complex,
     boundary_of,
     build_complex,

@@ -371,8 +371,8 @@ class Feedback:
 
     def __init__(self, door_min_rv: float | None = None):
         try:
-            from coordinator.topology import evidence as ev  # noqa: F401
-            from coordinator.config import CoordinatorConfig
+            from swarmcover.coordinator.topology import evidence as ev  # noqa: F401
+            from swarmcover.coordinator.config import CoordinatorConfig
             door = CoordinatorConfig().door_min_rv if door_min_rv is None else door_min_rv
             self._ev = ev.Evidence(door_min_rv=door, robot_radius_rv=RADIUS / RV)
         except Exception:
@@ -408,8 +408,8 @@ def run_map(case: MapCase, *, per_cycle: int = 8, cap: int | None = None,
     topology (TopologyParams fields) override the defaults, for experiments."""
     import dataclasses
 
-    from coordinator import build_complex, certify, detect_fence, plan_pushes, verify_certificate
-    from coordinator.config import CoordinatorConfig
+    from swarmcover.coordinator import build_complex, certify, detect_fence, plan_pushes, verify_certificate
+    from swarmcover.coordinator.config import CoordinatorConfig
 
     P = dataclasses.replace(CoordinatorConfig().topology(), **(topology or {}))
     rng = np.random.default_rng([case.seed, case.index, 7])
@@ -535,7 +535,7 @@ def _planner_claim(sw: Swarm, case: MapCase, P, fb: Feedback, reps: dict) -> boo
     on the same reports ``reps`` (no lattice, no redundancy pass), complete = certified with
     no frontier edge and no deployment left (the deployer's finish)."""
     import inspect
-    from coordinator.planner import Snapshot, plan_cycle
+    from swarmcover.coordinator.planner import Snapshot, plan_cycle
 
     snap = Snapshot(occupant={i: i for i in reps}, nbrs={i: r["neighbours"] for i, r in reps.items()},
                     contact={i: r["touch_bearing"] for i, r in reps.items() if r["touch"]},

@@ -24,11 +24,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from world.config import parse_config  # noqa: E402
-from world.groundtruth import lattice  # noqa: E402
-from world.maps import build_map  # noqa: E402
-from world.physics import Physics  # noqa: E402
-from world.sensing import Sensors  # noqa: E402
+from swarmcover.world.config import parse_config  # noqa: E402
+from swarmcover.world.groundtruth import lattice  # noqa: E402
+from swarmcover.world.maps import build_map  # noqa: E402
+from swarmcover.world.physics import Physics  # noqa: E402
+from swarmcover.world.sensing import Sensors  # noqa: E402
 
 
 def bench_config(seed: int) -> dict:

@@ -16,7 +16,7 @@ import dataclasses
 import math
 from typing import Any, Iterable, Mapping
 
-from ground.geometry import signed_area
+from swarmcover.ground.geometry import signed_area
 
 # numpy is imported inside the polygon check only (self_crossing and its helpers): agents
 # import this module for their [agent] section and must not pay for numpy (issue 18).

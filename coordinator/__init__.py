@@ -8,9 +8,9 @@
 * ``node``: the Zenoh process around the deployer.
 
 This package re-exports the topology core (and ``wrap`` and ``circular_mean``), so
-``from coordinator import build_complex, certify`` keeps working.
+``from swarmcover.coordinator import build_complex, certify`` keeps working.
 """
-from ground.angles import circular_mean, wrap
+from swarmcover.ground.angles import circular_mean, wrap
 
 from . import topology
 from .topology import *  # noqa: F403

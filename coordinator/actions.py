@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Union
 
-from bus.messages import Complex, Remove, Spawn, Task
+from swarmcover.bus.messages import Complex, Remove, Spawn, Task
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ import dataclasses
 from dataclasses import dataclass
 from enum import StrEnum
 
-from bus.configcheck import ConfigError, check_fields
+from swarmcover.bus.configcheck import ConfigError, check_fields
 
 from .topology.params import TopologyParams
 

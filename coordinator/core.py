@@ -11,7 +11,7 @@ boundary, and announces its tasks in the next Senses). No I/O, no wall clock.
 """
 from __future__ import annotations
 
-from bus.messages import ROBOT_KINDS, Clock, CoordAck, Status
+from swarmcover.bus.messages import ROBOT_KINDS, Clock, CoordAck, Status
 
 from .actions import RemoveRobot, SendTask, SpawnRobot
 from .deployer import Deployer

@@ -23,7 +23,7 @@ import logging
 from enum import StrEnum
 from typing import Callable
 
-from bus.messages import Complex, Remove, Status, Task
+from swarmcover.bus.messages import Complex, Remove, Status, Task
 
 from .actions import Action, Done, Outbox, PublishComplex, RemoveRobot
 from .config import CoordinatorConfig

@@ -25,11 +25,11 @@ import time
 
 import zenoh
 
-from bus.keys import Keys
-from bus.messages import Clock, Status, WorldInfo
-from bus.node import run_node
-from bus.session import Mailbox, Receiver, Shutdown, publisher, query_world_info
-from bus.trust import SignedPublisher, key_from_env
+from swarmcover.bus.keys import Keys
+from swarmcover.bus.messages import Clock, Status, WorldInfo
+from swarmcover.bus.node import run_node
+from swarmcover.bus.session import Mailbox, Receiver, Shutdown, publisher, query_world_info
+from swarmcover.bus.trust import SignedPublisher, key_from_env
 
 from .actions import Done, PublishComplex, RemoveRobot, SendTask, SpawnRobot
 from .config import CoordinatorConfig
@@ -89,7 +89,7 @@ class ClockTrust:
 
 def load_run_config(path: str | None, info: WorldInfo | None):
     """The run config: the world's resolved one if it answered, else the file."""
-    from world.config import load_config, loads_config
+    from swarmcover.world.config import load_config, loads_config
     if info is not None and info.config:
         return loads_config(info.config, path="world/info")
     if path is None:

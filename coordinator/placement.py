@@ -6,7 +6,7 @@ deployer's :meth:`coordinator.deployer.Deployer.build_snapshot` is :meth:`Placem
 """
 from __future__ import annotations
 
-from ground.angles import wrap
+from swarmcover.ground.angles import wrap
 
 from .planner import Snapshot
 from .roster import Roster

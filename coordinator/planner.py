@@ -347,7 +347,7 @@ def _place_on_lattice(snap: Snapshot, jobs: list[JobSpec], spacing: float,
     fixed: pushes already under way this cycle; their targets count as taken.
     Each placed job's deploy bearings are re-derived for the distance chosen.
     """
-    from ground.angles import wrap
+    from swarmcover.ground.angles import wrap
     from .topology.shape import Lattice, align_headings, estimate_shape, lattice_target
     from .topology.targets import frontier_desired_bearings
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import logging
 
-from bus.messages import Status, Task
+from swarmcover.bus.messages import Status, Task
 
 from .actions import Outbox
 from .config import CoordinatorConfig, PushMode

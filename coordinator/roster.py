@@ -12,8 +12,8 @@ from collections.abc import Container
 from dataclasses import dataclass
 from typing import Callable
 
-from bus.messages import Spawn, Status
-from ground.angles import wrap
+from swarmcover.bus.messages import Spawn, Status
+from swarmcover.ground.angles import wrap
 
 log = logging.getLogger("swarmcover.coordinator")
 

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import math
 
-from bus.messages import Task
-from ground.angles import wrap
+from swarmcover.bus.messages import Task
+from swarmcover.ground.angles import wrap
 
 from .config import CoordinatorConfig
 from .planner import JobSpec, Snapshot

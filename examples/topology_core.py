@@ -16,7 +16,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout
 
-from coordinator import TopologyParams, build_complex, certify, detect_fence  # noqa: E402
+from swarmcover.coordinator import TopologyParams, build_complex, certify, detect_fence  # noqa: E402
 
 RV = 1.0
 SPACING = 0.9 * RV  # d0 = rv - eps with eps = 0.1 rv

@@ -61,7 +61,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from bus.configcheck import Checker, ConfigError  # one style for every section
+from swarmcover.bus.configcheck import Checker, ConfigError  # one style for every section
 
 from .frames import UP_AXES, Transform2D
 from .mocap import MOCAP_TYPES

@@ -32,10 +32,10 @@ import time
 from collections import deque
 from dataclasses import dataclass
 
-from bus.messages import LiveCmd, MocapPose
-from bus.node import ready, run_node
-from bus.session import Mailbox, Receiver, add_zenoh_args, publisher, query_world_info
-from ground.geometry import flat_to_points
+from swarmcover.bus.messages import LiveCmd, MocapPose
+from swarmcover.bus.node import ready, run_node
+from swarmcover.bus.session import Mailbox, Receiver, add_zenoh_args, publisher, query_world_info
+from swarmcover.ground.geometry import flat_to_points
 
 from .driver import CommandExpiry
 from .frames import Transform2D, world_to_mocap, wrap
@@ -213,7 +213,7 @@ def make_room(walls: str, run_config: str | None, session, keys) -> Room | None:
         return None
     if run_config:
         try:
-            from world.maps import map_from_path
+            from swarmcover.world.maps import map_from_path
             cfg, wm = map_from_path(run_config)
             room = Room.from_polygons(wm.boundary, wm.obstacles, cfg.robots.radius)
             log.info("walls: %d segments of the map in %s, body radius %.3f m",

@@ -18,7 +18,7 @@ import math
 from collections import deque
 from typing import Iterable, Sequence
 
-from ground.angles import wrap
+from swarmcover.ground.angles import wrap
 
 
 def percentile(xs: Sequence[float], p: float) -> float:

@@ -78,7 +78,7 @@ class ZenohMocapSource:
 
     def __init__(self, session, keys, key: str | None = None, format: str = "msgpack",
                  logger: logging.Logger | None = None):
-        from bus.session import Mailbox, Receiver
+        from swarmcover.bus.session import Mailbox, Receiver
         if format not in self.FORMATS:
             raise ValueError(f"mocap.format: {format!r} not one of {', '.join(self.FORMATS)}")
         template = key or keys.mocap("{body}")
@@ -101,7 +101,7 @@ class ZenohMocapSource:
             return None
         body = m.group(1)
         if self.format == "msgpack":
-            from bus.messages import MocapPose
+            from swarmcover.bus.messages import MocapPose
             msg = self.receiver.decode(key, payload, MocapPose)
             if msg is None:
                 return None

@@ -30,11 +30,11 @@ import sys
 import time
 from collections import deque
 
-from bus.keys import Keys
-from bus.messages import CmdVel, Pose, Spawn, Truth, TwinCmd
-from bus.node import ready, run_node
-from bus.session import Mailbox, Receiver, add_zenoh_args, publisher, query_world_info
-from ground.geometry import flat_to_points
+from swarmcover.bus.keys import Keys
+from swarmcover.bus.messages import CmdVel, Pose, Spawn, Truth, TwinCmd
+from swarmcover.bus.node import ready, run_node
+from swarmcover.bus.session import Mailbox, Receiver, add_zenoh_args, publisher, query_world_info
+from swarmcover.ground.geometry import flat_to_points
 
 from . import config as hwconfig
 from .frames import mocap_to_world

@@ -41,14 +41,14 @@ class LiveCmdOutput:
     """LiveCmd on live/<id>/cmd, each valid for ``ttl`` seconds after its receipt."""
 
     def __init__(self, session, keys, robot: int, ttl: float = 0.3):
-        from bus.session import publisher
+        from swarmcover.bus.session import publisher
         self.robot = robot
         self.ttl = ttl
         self.key = keys.live_cmd(robot)
         self.pub = publisher(session, self.key, block=True, express=True)
 
     def send(self, v: float, omega: float, t: float) -> None:
-        from bus.messages import LiveCmd
+        from swarmcover.bus.messages import LiveCmd
         self.pub.put(LiveCmd(robot=self.robot, t=max(0.0, t), v=v, omega=omega,
                              ttl=self.ttl).encode())
 

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from ground.geometry import rings_to_segments
+from swarmcover.ground.geometry import rings_to_segments
 
 PUSH_ITERATIONS = 4      # corners need more than one push
 

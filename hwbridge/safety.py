@@ -18,7 +18,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Iterable, Sequence
 
-from ground.geometry import edge_distance, point_in_polygon  # noqa: F401  (hwbridge.node)
+from swarmcover.ground.geometry import edge_distance, point_in_polygon  # noqa: F401  (hwbridge.node)
 
 REASONS = ("ok", "clamped", "no_command", "command_stale", "no_mocap", "mocap_stale",
            "geofence")

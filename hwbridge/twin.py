@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ground.angles import wrap
+from swarmcover.ground.angles import wrap
 
 
 @dataclass(frozen=True, slots=True)

@@ -22,7 +22,7 @@ import textwrap
 import tokenize
 from dataclasses import dataclass
 
-from ground.toml import dumps_toml, toml_value
+from swarmcover.ground.toml import dumps_toml, toml_value
 
 # --------------------------------------------------------------------------- doc table
 # (unit, explanation) for fields whose class has no inline comment, and units everywhere
@@ -219,10 +219,10 @@ def _from_class(section: str, cls, skip=(), inst=None) -> list[Field]:
 
 def sections() -> list[Section]:
     """Every section of a run config, in file order, with fields, units and defaults."""
-    from agents.params import AgentParams
-    from coordinator.config import CoordinatorConfig
-    from hwbridge.config import BridgeConfig, FakeParams, LiveRobot
-    from world.config import MapConfig, RobotsConfig, SensingConfig, WorldConfig
+    from swarmcover.agents.params import AgentParams
+    from swarmcover.coordinator.config import CoordinatorConfig
+    from swarmcover.hwbridge.config import BridgeConfig, FakeParams, LiveRobot
+    from swarmcover.world.config import MapConfig, RobotsConfig, SensingConfig, WorldConfig
 
     top = [Field("name", "run", *DOCS[""]["name"]), Field("rv", 1.0, *DOCS[""]["rv"])]
     mp = _from_class("map", MapConfig)
@@ -348,7 +348,7 @@ def _resolved_hwbridge(raw: dict, path: str) -> dict:
     BridgeConfig that hwbridge/config.py resolves (defaults, [robots].v_max/w_max and
     "/<body>" namespaces included). A robot's ``start`` stays out when unset: the fake robot
     then starts at its source, found when it starts."""
-    from hwbridge.config import from_dict
+    from swarmcover.hwbridge.config import from_dict
     bc = from_dict(raw, path)
     secs = {s.name: s.fields for s in sections()}
 
@@ -371,8 +371,8 @@ def complete_resolved_toml(text: str, path: str = "<resolved>", header: str = ""
     as they are. header: comment lines put first (values of the run that are not config)."""
     import tomllib
 
-    from agents.params import from_config
-    from coordinator.config import CoordinatorConfig
+    from swarmcover.agents.params import from_config
+    from swarmcover.coordinator.config import CoordinatorConfig
     raw = tomllib.loads(text)
     agent = from_config(raw, path)
     coord = CoordinatorConfig.from_section(raw.get("coordinator"), raw.get("rv", 1.0), path)
@@ -391,16 +391,16 @@ def check_text(text: str, path: str = "<config>", base_dir: str = ".") -> list[s
     ValueError (the owners' errors) naming file, section, field and value."""
     import tomllib
 
-    from agents.params import from_config
-    from coordinator.config import CoordinatorConfig
-    from world.config import loads_config
+    from swarmcover.agents.params import from_config
+    from swarmcover.coordinator.config import CoordinatorConfig
+    from swarmcover.world.config import loads_config
     cfg = loads_config(text, path, base_dir)
     raw = tomllib.loads(text)
     from_config(raw, path)
     CoordinatorConfig.from_section(raw.get("coordinator"), cfg.rv, path)
     checked = ["map", "robots", "sensing", "world", "agent", "coordinator"]
     if "hwbridge" in raw:
-        from hwbridge.config import loads as bridge_loads
+        from swarmcover.hwbridge.config import loads as bridge_loads
         bridge_loads(text, path)
         checked.append("hwbridge")
     return checked

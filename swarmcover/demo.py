@@ -8,9 +8,9 @@ import os
 import sys
 import time
 
-from bus.messages import Demo
-from bus.node import UsageError, ready, run_node
-from bus.session import publisher
+from swarmcover.bus.messages import Demo
+from swarmcover.bus.node import UsageError, ready, run_node
+from swarmcover.bus.session import publisher
 
 
 def _args(p) -> None:

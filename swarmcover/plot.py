@@ -21,8 +21,8 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from bus import messages as m
-from viz.geometry import redundant_robots
+from swarmcover.bus import messages as m
+from swarmcover.viz.geometry import redundant_robots
 
 log = logging.getLogger("swarmcover.plot")
 
@@ -223,8 +223,8 @@ def make_plots(path: str | Path, out: str | Path | None = None, *, cycles: list[
     """Everything ``swarmcover plot`` writes; returns the written paths."""
     from swarmcover.progress import Progress
 
-    from viz.coverage import coverage_measure
-    from viz.figures import render_progress, render_snapshot, snapshot_image, write_gif
+    from swarmcover.viz.coverage import coverage_measure
+    from swarmcover.viz.figures import render_progress, render_snapshot, snapshot_image, write_gif
 
     run = load_run(path, progress=progress)
     cov_fn, cov_label = coverage_measure("none" if run.info.name == NO_MAP else coverage)
@@ -276,9 +276,9 @@ def make_plots(path: str | Path, out: str | Path | None = None, *, cycles: list[
 
 
 def main(argv: list[str] | None = None) -> int:
-    from bus.session import setup_logging
+    from swarmcover.bus.session import setup_logging
 
-    from viz.coverage import KINDS
+    from swarmcover.viz.coverage import KINDS
 
     p = argparse.ArgumentParser(prog="swarmcover plot", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -96,8 +96,8 @@ def recheck(cx, positions: dict | None = None, rv: float | None = None,
     # GF(2): O must be a boundary of the message's triangles
     from types import SimpleNamespace
 
-    from coordinator.topology.certificate import certify
-    from coordinator.topology.complex import Complex as TopoComplex
+    from swarmcover.coordinator.topology.certificate import certify
+    from swarmcover.coordinator.topology.complex import Complex as TopoComplex
     n = len(verts)
     ids = np.asarray(verts, np.int64)
     perm = np.argsort(ids)

@@ -49,8 +49,8 @@ from typing import Iterable
 import msgspec
 from mcap.writer import CompressionType, Writer
 
-from bus import messages as m
-from bus.keys import ROOT, message_for_key
+from swarmcover.bus import messages as m
+from swarmcover.bus.keys import ROOT, message_for_key
 
 log = logging.getLogger("swarmcover.record")
 
@@ -570,7 +570,7 @@ def _args(p: argparse.ArgumentParser) -> None:
 
 def _prepare(args) -> int | None:
     """Flags checked before any connection; ``--from`` converts offline and ends here."""
-    from bus.keys import check_swarm
+    from swarmcover.bus.keys import check_swarm
     from swarmcover.progress import Progress
     args.scene_hz = 0.0 if args.no_scene else args.scene_hz
     if args.scene_hz < 0:
@@ -592,7 +592,7 @@ def _prepare(args) -> int | None:
 
 
 def _serve(args, session, keys, stop) -> int:
-    from bus.node import ready
+    from swarmcover.bus.node import ready
     from swarmcover.progress import Progress
     keyexpr = resolve_keyexpr(args.keyexpr, args.swarm)
     excludes = [resolve_keyexpr(x, args.swarm) for x in args.exclude]
@@ -623,7 +623,7 @@ def _serve(args, session, keys, stop) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from bus.node import run_node
+    from swarmcover.bus.node import run_node
     # grace 0: the recorder bounds its own exit and must never be cut short mid-flush
     return run_node("swarmcover record", __doc__, _args, _serve, argv=argv,
                     logger="swarmcover.record", before_session=_prepare, grace_s=0,

@@ -32,7 +32,7 @@ from typing import Iterator
 
 from mcap.reader import make_reader
 
-from bus.keys import ROOT, check_swarm
+from swarmcover.bus.keys import ROOT, check_swarm
 from mcap.decoder import DecoderFactory
 
 from swarmcover.record import (KIND_LIVELINESS, KIND_PUT, KIND_QUERY_REPLY, KIND_SCENE,
@@ -221,8 +221,8 @@ class Replayer:
     def _publisher(self, key: str):
         pub = self._pubs.get(key)
         if pub is None:
-            from bus.session import publisher
-            from bus.trust import SignedPublisher  # source_info, so viewers take its Complex
+            from swarmcover.bus.session import publisher
+            from swarmcover.bus.trust import SignedPublisher  # source_info, so viewers take its Complex
             pub = SignedPublisher(publisher(self.session, key, block=True), None)
             self._pubs[key] = pub
         return pub
@@ -300,7 +300,7 @@ class Replayer:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from bus.session import Shutdown, add_zenoh_args, open_session, setup_logging
+    from swarmcover.bus.session import Shutdown, add_zenoh_args, open_session, setup_logging
     from swarmcover.progress import Progress
 
     p = argparse.ArgumentParser(prog="swarmcover replay", description=__doc__,

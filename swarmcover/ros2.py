@@ -34,8 +34,8 @@ import threading
 
 from rosbags.typesys import Stores, get_typestore
 
-from bus import messages as m
-from ground.geometry import flat_to_points
+from swarmcover.bus import messages as m
+from swarmcover.ground.geometry import flat_to_points
 
 POSE_ARRAY = "geometry_msgs/msg/PoseArray"
 MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
@@ -135,7 +135,7 @@ def marker_array(info: m.WorldInfo | None, truth: m.Truth | None, cx: m.Complex 
     """visualization_msgs/MarkerArray of the scene: a DELETEALL, then one marker per layer
     (namespaces walls, sources, robots, ids, redundant, mocap, edges, frontier, obstacle,
     coverage), so each array replaces the previous one in RViz."""
-    from viz.geometry import build_scene
+    from swarmcover.viz.geometry import build_scene
     T = typestore().types
     Marker, Point, Color = (T["visualization_msgs/msg/Marker"], T["geometry_msgs/msg/Point"],
                             T["std_msgs/msg/ColorRGBA"])
@@ -234,7 +234,7 @@ class Ros2Out:
 
     def __init__(self, session, *, domain: int = 0, namespace: str = "/swarmcover",
                  node: str = "swarmcover_view", marker_hz: float = 2.0):
-        from hwbridge.ros2 import rmw_zenoh_attachment
+        from swarmcover.hwbridge.ros2 import rmw_zenoh_attachment
         if not isinstance(domain, int) or not 0 <= domain <= 232:
             raise ValueError(f"--ros-domain {domain!r}: an integer in [0, 232]")
         self.session = session

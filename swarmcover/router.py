@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import logging
 
-from bus.node import ready, run_node
+from swarmcover.bus.node import ready, run_node
 
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 log = logging.getLogger("swarmcover.router")

@@ -40,11 +40,11 @@ from pathlib import Path
 import numpy as np
 import zenoh
 
-from bus.keys import Keys
-from bus.messages import Complex, Spawn, Truth, WorldInfo
-from bus.session import (Receiver, Shutdown, add_zenoh_args, make_config, open_session,
+from swarmcover.bus.keys import Keys
+from swarmcover.bus.messages import Complex, Spawn, Truth, WorldInfo
+from swarmcover.bus.session import (Receiver, Shutdown, add_zenoh_args, make_config, open_session,
                          setup_logging, zenoh_argv)
-from bus.trust import KEY_ENV, new_key, sample_origin, verify
+from swarmcover.bus.trust import KEY_ENV, new_key, sample_origin, verify
 
 log = logging.getLogger("swarmcover.run")
 MAX_COORDINATOR_RESTARTS = 3
@@ -146,7 +146,7 @@ def _free_port() -> int:
 
 def resolve_config(path: str, args) -> tuple[object, str]:
     """Load CONFIG, apply the command-line overrides; returns (RunConfig, resolved TOML)."""
-    from world.config import load_config, to_toml
+    from swarmcover.world.config import load_config, to_toml
     cfg = load_config(path)
     world = cfg.world
     if args.seed is not None:
@@ -179,7 +179,7 @@ def compute_summary(cfg, wmap, truth: Truth | None, cx: Complex | None, extra: d
 
     Ratios (ratio, ratio_same_spacing, robots_per_bound) are null unless certified; every
     value is finite or null (the summary is strict JSON)."""
-    from world.groundtruth import coverage_fraction, euler_bound, ideal_count, reachable_uncovered
+    from swarmcover.world.groundtruth import coverage_fraction, euler_bound, ideal_count, reachable_uncovered
     rv = cfg.rv
     pos = {}
     if truth is not None:
@@ -307,8 +307,8 @@ def twin_tracking(report: dict) -> dict:
 def default_robots_max(cfg, wmap, resolved: str) -> tuple[object, str, dict]:
     """Without an explicit robots_max ([coordinator] or --robots-max), the cap scales with the
     map: ceil(3 x the Euler lower bound). Returns (cfg, resolved TOML, how it was set)."""
-    from world.config import to_toml
-    from world.groundtruth import ROBOTS_MAX_PER_BOUND, default_robots_max as dflt, euler_bound
+    from swarmcover.world.config import to_toml
+    from swarmcover.world.groundtruth import ROBOTS_MAX_PER_BOUND, default_robots_max as dflt, euler_bound
     coord = dict(cfg.sections.get("coordinator", {}) or {})
     bound = euler_bound(wmap, cfg.rv)["robots"]
     if "robots_max" in coord:
@@ -406,7 +406,7 @@ def check_zenoh_flags(args) -> None:
     """The shared Zenoh flags as ``run`` reads them, before anything starts: one router
     (``--router`` or ``--connect``, else the embedded one at ``--port``/``--listen``),
     client or peer processes. Raises a ConfigError naming both flags of a conflicting pair."""
-    from bus.configcheck import Checker
+    from swarmcover.bus.configcheck import Checker
     from swarmcover.validate import CLI, _check_endpoint, _check_reachable, port_free
     ck = Checker(CLI, "")
     given = {"--router": args.router, "--connect": args.connect, "--listen": args.listen,
@@ -508,7 +508,7 @@ class RunState:
     def saw_complex(self, cx: Complex) -> int:
         """An accepted Complex: the latest one, the robots it marks redundant (final.png
         marks them while outside the complex), and the cycles so far (``on_cycle``)."""
-        from viz.geometry import redundant_robots
+        from swarmcover.viz.geometry import redundant_robots
         self.last_cx = cx
         self.removed |= redundant_robots(cx)
         return self.on_cycle(cx)
@@ -746,7 +746,7 @@ def _live_limits(cfg, resolved: str, where: str) -> dict:
     section raises its ConfigError (a ValueError naming the field) before anything starts."""
     if not cfg.section("hwbridge"):
         return {}
-    from hwbridge.config import loads
+    from swarmcover.hwbridge.config import loads
     return {r.id: (r.v_max, r.w_max) for r in loads(resolved, where).robots}
 
 
@@ -817,10 +817,10 @@ def _first_error(path: Path) -> str:
 
 def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Keys, out: Path,
                stop: Shutdown, state: RunState, t_wall0: float, live_limits: dict) -> None:
-    from bus.session import query_world_info
+    from swarmcover.bus.session import query_world_info
     from swarmcover.progress import Progress
     from swarmcover.recheck import recheck
-    from world.groundtruth import coverage_fraction
+    from swarmcover.world.groundtruth import coverage_fraction
     rx = Receiver(log)
     inbox = _Inbox()
     coord = _Coordinator(bytes.fromhex(new_key()))
@@ -1071,14 +1071,14 @@ def _check_agents(launcher: Launcher, unready: dict, state: RunState) -> None:
 def final_figure(state: RunState, truth, cx, cfg):
     """final.png's figure: the world's map, the decided truth and complex, and the robots
     removed as redundant that the run saw on the bus (``RunState.removed``) with their mark."""
-    from viz.figures import snapshot_figure
+    from swarmcover.viz.figures import snapshot_figure
     return snapshot_figure(state.info, truth, cx, removed=state.removed,
                            title=f"{cfg.name}: {'certified' if cx and cx.certified else 'not certified'}")
 
 
 def _final_png(state: RunState, out: Path, truth, cx, cfg) -> None:
     try:
-        from viz.figures import SNAPSHOT_DPI
+        from swarmcover.viz.figures import SNAPSHOT_DPI
         final_figure(state, truth, cx, cfg).savefig(out / "final.png", dpi=SNAPSHOT_DPI)
     except Exception as e:  # a missing figure must not lose the summary
         log.warning("could not draw final.png: %s", e)

@@ -30,9 +30,9 @@ import math
 import foxglove.messages as fm
 from foxglove import Schema
 
-from bus import messages as m
-from ground.geometry import flat_to_points
-from viz.geometry import redundant_robots
+from swarmcover.bus import messages as m
+from swarmcover.ground.geometry import flat_to_points
+from swarmcover.viz.geometry import redundant_robots
 
 SCENE_TOPIC = "/swarmcover/scene"
 FRAME = "map"
@@ -120,7 +120,7 @@ class SceneState:
 
     def update(self, stamp_ns: int) -> fm.SceneUpdate:
         """The whole scene as one SceneUpdate stamped ``stamp_ns`` (ns since the epoch)."""
-        from viz.geometry import build_scene
+        from swarmcover.viz.geometry import build_scene
 
         ts = fm.Timestamp(int(stamp_ns // 1_000_000_000), int(stamp_ns % 1_000_000_000))
         info = self.info

@@ -27,7 +27,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from bus.security import ROLES, Profile, SecurityError, check_name
+from swarmcover.bus.security import ROLES, Profile, SecurityError, check_name
 
 DEFAULT_AGENTS = 256
 DEFAULT_HOSTS = ("localhost", "127.0.0.1")
@@ -314,7 +314,7 @@ def export_profile(src: str | os.PathLike, out: str | os.PathLike, names: list[s
 def router_config(src: str | os.PathLike, listen: list[str]) -> dict:
     """A complete router config (JSON, valid JSON5) for this profile: for ``zenohd -c FILE``
     or ``swarmcover router --config FILE``. ``listen``: tls/ endpoints (tcp/ is upgraded)."""
-    from bus.security import secure_endpoints
+    from swarmcover.bus.security import secure_endpoints
     prof = Profile.at(src)
     for f in (prof.ca_cert, prof.router_cert, prof.router_key, prof.passwords, prof.acl):
         if not f.is_file():

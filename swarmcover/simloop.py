@@ -28,8 +28,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bus.messages import Complex, Spawn
-from coordinator.actions import Done, PublishComplex, RemoveRobot, SendTask, SpawnRobot
+from swarmcover.bus.messages import Complex, Spawn
+from swarmcover.coordinator.actions import Done, PublishComplex, RemoveRobot, SendTask, SpawnRobot
 
 log = logging.getLogger("swarmcover.simloop")
 
@@ -53,14 +53,14 @@ class SimLoop:
 
     def __init__(self, cfg, *, seed: int | None = None, coordinator_overrides: dict | None = None,
                  status_every: int | None = None):
-        from agents.core import AgentCore
-        from agents.params import from_config
-        from coordinator.config import CoordinatorConfig
-        from coordinator.core import CoordinatorCore, robot_kinds_from_config
-        from coordinator.deployer import Deployer
-        from world.config import to_dict
-        from world.core import WorldCore
-        from world.maps import build_map
+        from swarmcover.agents.core import AgentCore
+        from swarmcover.agents.params import from_config
+        from swarmcover.coordinator.config import CoordinatorConfig
+        from swarmcover.coordinator.core import CoordinatorCore, robot_kinds_from_config
+        from swarmcover.coordinator.deployer import Deployer
+        from swarmcover.world.config import to_dict
+        from swarmcover.world.core import WorldCore
+        from swarmcover.world.maps import build_map
 
         self.cfg = cfg
         self.wm = build_map(cfg)
@@ -127,7 +127,7 @@ class SimLoop:
 
     def _apply_ops(self) -> None:
         """The ack's spawns and removes, in its order (world/node.py's acked ops)."""
-        from world.core import SpawnRefused
+        from swarmcover.world.core import SpawnRefused
         w = self.world
         ops, self._ops = self._ops, []
         for m in ops:

@@ -20,9 +20,9 @@ from collections import defaultdict
 
 import zenoh
 
-from bus.keys import Keys, message_for_key
-from bus.messages import WireError, decode
-from bus.session import Mailbox, Shutdown, add_zenoh_args, keys_from_args, open_session
+from swarmcover.bus.keys import Keys, message_for_key
+from swarmcover.bus.messages import WireError, decode
+from swarmcover.bus.session import Mailbox, Shutdown, add_zenoh_args, keys_from_args, open_session
 
 
 def _full(keys: Keys, expr: str) -> str:

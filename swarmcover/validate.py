@@ -17,7 +17,7 @@ import socket
 from dataclasses import dataclass
 from pathlib import Path
 
-from bus.configcheck import Checker, ConfigError
+from swarmcover.bus.configcheck import Checker, ConfigError
 
 CLI = "command line"
 MAX_WALL_TIMEOUT_S = 30 * 24 * 3600.0     # a month
@@ -73,7 +73,7 @@ def check_flags(args) -> None:
     elif args.view_port is not None:
         _port(ck, "--view-port", args.view_port, busy_check=False)
     if args.swarm is not None:
-        from bus.keys import check_swarm
+        from swarmcover.bus.keys import check_swarm
         try:
             check_swarm(args.swarm)
         except ValueError:
@@ -93,7 +93,7 @@ def check_flags(args) -> None:
 def _check_profile(ck: Checker, args) -> None:
     """The --secure profile holds what the router we start, the world, the coordinator and
     run itself need (each agent's identity is checked by the agent)."""
-    from bus.security import SecurityError, config_inserts
+    from swarmcover.bus.security import SecurityError, config_inserts
     wanted = [("client", r) for r in ("world", "coordinator", "viewer")]
     if args.router is None:
         wanted.insert(0, ("router", "router"))
@@ -125,16 +125,16 @@ def check_run(args) -> Checked:
     # cheapest first, so a bad value is reported before the heavy imports
     # [agent] (and the [robots]/[sensing]/[world] values agents read), as every agent will
     # read it from the resolved file: a bad value here would kill every agent at start
-    from agents.params import from_toml_text
+    from swarmcover.agents.params import from_toml_text
     from_toml_text(resolved, path)
     # [hwbridge], by the bridge's own parser
     live_limits = _live_limits(cfg, resolved, path)
     # [coordinator], as the coordinator will read it (with --robots-max applied); importing
     # it loads the topology core (scipy)
-    from coordinator.config import CoordinatorConfig
+    from swarmcover.coordinator.config import CoordinatorConfig
     CoordinatorConfig.from_section(cfg.section("coordinator"), rv=cfg.rv, where=path)
     # the map itself: ROS images, size limits, sources in free space
-    from world.maps import build_map
+    from swarmcover.world.maps import build_map
     wmap = build_map(cfg)
     _check_spawns(cfg, wmap)
     if live_limits:
@@ -169,7 +169,7 @@ def _check_spawns(cfg, wmap) -> None:
 
 def _check_live(cfg, resolved: str, wmap) -> None:
     """Each live robot's twin spawns at a source that exists; a stand-in starts in free space."""
-    from hwbridge.config import loads
+    from swarmcover.hwbridge.config import loads
     for k, r in enumerate(loads(resolved, cfg.path).robots):
         ck = Checker(cfg.path, f"hwbridge.robots[{k}]")
         if r.source >= len(wmap.sources):

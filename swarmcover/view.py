@@ -37,13 +37,13 @@ from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
-from bus import messages as m
-from bus.keys import Keys
-from bus.session import undeclare
+from swarmcover.bus import messages as m
+from swarmcover.bus.keys import Keys
+from swarmcover.bus.session import undeclare
 
-import viz as _viz
-from viz.coverage import coverage_measure, map_bounds, polygon_xy
-from viz.geometry import build_scene, redundant_robots
+import swarmcover.viz as _viz
+from swarmcover.viz.coverage import coverage_measure, map_bounds, polygon_xy
+from swarmcover.viz.geometry import build_scene, redundant_robots
 
 log = logging.getLogger("swarmcover.view")
 PAGE = Path(_viz.__file__).with_name("static") / "view.html"  # package data of viz
@@ -245,7 +245,7 @@ class ViewServer:
                  max_hz: float = 10.0, coverage: str = "auto", info_retry_s: float = 2.0,
                  router: str = "", foxglove_port: int | None = None,
                  ros2: dict | None = None):
-        from bus.session import Mailbox, Receiver
+        from swarmcover.bus.session import Mailbox, Receiver
         self.session = session
         self.keys = keys
         self.router = router
@@ -330,7 +330,7 @@ class ViewServer:
 
     def start(self) -> "ViewServer":
         k = self.keys
-        from bus.trust import CoordinatorGate  # a Complex only from the coordinator
+        from swarmcover.bus.trust import CoordinatorGate  # a Complex only from the coordinator
         gate = CoordinatorGate().attach(self.session, k.prefix)
         self._subs.append(gate)
         for key in (k.truth, k.complex, f"{k.prefix}/robot/*/odom"):
@@ -426,7 +426,7 @@ class ViewServer:
 
 
 def _args(p: argparse.ArgumentParser) -> None:
-    from viz.coverage import KINDS
+    from swarmcover.viz.coverage import KINDS
     p.add_argument("--port", type=int, default=8765, help="HTTP port (default 8765; 0 = any free)")
     p.add_argument("--host", default="127.0.0.1",
                    help="address to serve on (default 127.0.0.1: this machine only)")
@@ -449,8 +449,8 @@ def _args(p: argparse.ArgumentParser) -> None:
 
 
 def _serve(args, session, keys, stop) -> int:
-    from bus.node import ready
-    from bus.session import DEFAULT_ROUTER
+    from swarmcover.bus.node import ready
+    from swarmcover.bus.session import DEFAULT_ROUTER
     router = ", ".join(args.connect or ([] if args.mode in ("peer", "router")
                                         else [DEFAULT_ROUTER])) or f"{args.mode} mode"
     view = None
@@ -487,7 +487,7 @@ def _serve(args, session, keys, stop) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from bus.node import run_node
+    from swarmcover.bus.node import run_node
     return run_node("swarmcover view", __doc__, _args, _serve, argv=argv,
                     logger="swarmcover.view", formatter_class=argparse.RawDescriptionHelpFormatter)
 

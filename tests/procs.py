@@ -122,7 +122,7 @@ mode = "lockstep"
 
 def wait_until(pred, timeout: float, interval: float = 0.05) -> bool:
     """Poll ``pred`` until it is true or ``timeout`` seconds pass (bus.session.wait_for)."""
-    from bus.session import wait_for
+    from swarmcover.bus.session import wait_for
     return wait_for(pred, timeout, interval)
 
 
@@ -166,7 +166,7 @@ def client_session(endpoint: str, swarm: str = "default"):
     """An in-test Zenoh client session connected to ``endpoint`` (close it!)."""
     import argparse
 
-    from bus.session import add_zenoh_args, open_session
+    from swarmcover.bus.session import add_zenoh_args, open_session
     p = argparse.ArgumentParser()
     add_zenoh_args(p)
     return open_session(p.parse_args(["--connect", endpoint, "--swarm", swarm]))
@@ -196,7 +196,7 @@ def no_leftovers(out: Path, timeout: float = 10.0) -> None:
 def decoded_into(typ, sink: list, lock):
     """A Zenoh subscriber callback: appends each payload that decodes as ``typ`` to ``sink``
     under ``lock``; undecodable payloads are dropped (it never blocks nor raises)."""
-    from bus.messages import decode
+    from swarmcover.bus.messages import decode
 
     def cb(sample):
         try:

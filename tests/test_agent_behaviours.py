@@ -6,9 +6,9 @@ import math
 
 import pytest
 
-from agents.behaviours import Behaviour
-from agents.params import AgentParams
-from bus.messages import Status, Task
+from swarmcover.agents.behaviours import Behaviour
+from swarmcover.agents.params import AgentParams
+from swarmcover.bus.messages import Status, Task
 from test_agent_kinematics import KinSim, bearings_from, run
 
 PI = math.pi

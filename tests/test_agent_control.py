@@ -7,7 +7,7 @@ import math
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from agents.control import (FrameTracker, StopRule, away_direction, blocks, bearing_errors,
+from swarmcover.agents.control import (FrameTracker, StopRule, away_direction, blocks, bearing_errors,
                             circmean, diffdrive, frame_psi, heading_offset, homing_gradient,
                             homing_velocity, slide, snapshot_offsets, wrap)
 

@@ -21,9 +21,9 @@ HEAVY = ("numpy", "scipy", "pymunk", "matplotlib", "PIL")
 # what an agent's main imports, plus what its --run-config path uses at start-up
 # (agents.node.resolve_params -> from_toml_text, world_mode -> world.config)
 AGENT_START = """
-import agents.node
-from agents.params import from_toml_text
-from world.config import WorldConfig
+import swarmcover.agents.node
+from swarmcover.agents.params import from_toml_text
+from swarmcover.world.config import WorldConfig
 from_toml_text(open("configs/open_room.toml").read(), "configs/open_room.toml")
 WorldConfig().mode
 """
@@ -50,6 +50,6 @@ def test_agent_imports_no_heavy_library():
 def test_the_probe_sees_a_heavy_import():
     """The check above can fail: the same probe reports numpy once something imports it
     (here the polygon check of a world config, which imports it on first use)."""
-    got = heavy_after(AGENT_START + "from bus.configcheck import self_crossing\n"
+    got = heavy_after(AGENT_START + "from swarmcover.bus.configcheck import self_crossing\n"
                       "assert self_crossing([[0, 0], [1, 0], [1, 1], [0, 1]]) is None\n")
     assert "numpy" in got

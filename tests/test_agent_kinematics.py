@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import random
 
-from bus.messages import Sense
+from swarmcover.bus.messages import Sense
 
 PI = math.pi
 

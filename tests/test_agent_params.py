@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from agents.params import AgentParams, ParamError, from_config, from_toml_text, parse_override
+from swarmcover.agents.params import AgentParams, ParamError, from_config, from_toml_text, parse_override
 
 
 def test_defaults_match_the_brief():
@@ -60,7 +60,7 @@ def test_the_inproc_loop_and_an_agent_process_read_the_same_params():
     On every shipped config the two must agree (issue 17: one runtime)."""
     from pathlib import Path
 
-    from world.config import load_config, to_dict, to_toml
+    from swarmcover.world.config import load_config, to_dict, to_toml
     paths = sorted((Path(__file__).resolve().parent.parent / "configs").glob("*.toml"))
     assert len(paths) >= 8
     for path in paths:

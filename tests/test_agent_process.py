@@ -11,8 +11,8 @@ import time
 
 import pytest
 
-from bus.keys import Keys
-from bus.messages import CmdVel, Sense, Status, Task, decode
+from swarmcover.bus.keys import Keys
+from swarmcover.bus.messages import CmdVel, Sense, Status, Task, decode
 from procs import client_session, decoded_into
 
 pytestmark = pytest.mark.timeout(120)

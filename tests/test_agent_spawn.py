@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from bus.keys import Keys
+from swarmcover.bus.keys import Keys
 from procs import client_session
 
 pytestmark = pytest.mark.timeout(120)
@@ -105,7 +105,7 @@ def test_spawn_rejects_an_explicit_id(procs):
 
 
 def test_supervisor_start_poll_stop(zargs):
-    from agents.supervisor import Supervisor
+    from swarmcover.agents.supervisor import Supervisor
     import subprocess
     with Supervisor(["--info-timeout", "0", *zargs]) as sup:
         pid = sup.start(4, stdout=subprocess.PIPE)
@@ -138,7 +138,7 @@ def test_a_second_agent_with_a_taken_id_is_refused_naming_the_id(procs, zargs):
 def test_an_agent_without_a_body_is_available_until_its_first_sense(procs, zargs, router):
     """An agent started by hand holds avail/robot/<id> (and alive/robot/<id>) while it has
     no body, so a coordinator can place it; a world's Sense for it ends availability."""
-    from bus.messages import Sense
+    from swarmcover.bus.messages import Sense
     swarm = zargs[zargs.index("--swarm") + 1]
     keys = Keys(swarm)
     a = procs.swarmcover("agent", "--id", "11", "--info-timeout", "0", *zargs)

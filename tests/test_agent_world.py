@@ -12,8 +12,8 @@ import time
 
 import pytest
 
-from bus.keys import Keys
-from bus.messages import Status, Task, Truth
+from swarmcover.bus.keys import Keys
+from swarmcover.bus.messages import Status, Task, Truth
 from procs import LOCKSTEP_ROBOTS_TOML, client_session, decoded_into
 
 pytestmark = pytest.mark.timeout(150)
@@ -135,7 +135,7 @@ def _run_once(procs, router, zargs, swarm, cfg_text, tmp_path, garbage: bool):
     """One lockstep run of 150 ticks: returns {tick: (vx, vy, wz)} of robot 0."""
     import random
 
-    from bus.messages import CmdVel, Pose
+    from swarmcover.bus.messages import CmdVel, Pose
     keys = Keys(swarm)
     z = ["--connect", router, "--swarm", swarm]
     cfg = tmp_path / f"{swarm}.toml"

@@ -19,7 +19,7 @@ _spec = importlib.util.spec_from_file_location("bench_bounds", ROOT / "bench" / 
 bounds = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(bounds)
 
-from world.maps import WorldMap  # noqa: E402
+from swarmcover.world.maps import WorldMap  # noqa: E402
 
 
 def _covered(P: np.ndarray, rv: float, pts: np.ndarray) -> np.ndarray:

@@ -8,9 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bus import ALL_MESSAGES, Complex, Keys, Sense, Status, Task, WireError, decode
-from bus.keys import TOPICS, message_for_key, topic_table_markdown
-from bus.messages import REGISTRY
+from swarmcover.bus import ALL_MESSAGES, Complex, Keys, Sense, Status, Task, WireError, decode
+from swarmcover.bus.keys import TOPICS, message_for_key, topic_table_markdown
+from swarmcover.bus.messages import REGISTRY
 
 
 def _scalar(meta):
@@ -195,7 +195,7 @@ def test_readme_topic_table_matches_code():
     readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
     assert topic_table_markdown() in readme, (
         "README topic table is out of date: paste the output of "
-        "`python -c 'from bus.keys import topic_table_markdown as t; print(t())'`")
+        "`python -c 'from swarmcover.bus.keys import topic_table_markdown as t; print(t())'`")
 
 
 def test_angles_accept_pi_boundary():

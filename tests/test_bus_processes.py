@@ -114,7 +114,7 @@ def test_router_sigterm_exits_zero(procs):
 STUCK_ON_STOP = """
 import sys, time
 sys.path.insert(0, {root!r})
-from bus.session import Shutdown
+from swarmcover.bus.session import Shutdown
 with Shutdown(grace_s=1.0) as stop:
     print("READY stuck", flush=True)
     stop.wait()
@@ -145,9 +145,9 @@ def test_query_world_info_skips_invalid_replies_and_honours_stop(router, caplog)
     import threading
     import uuid
 
-    from bus.keys import Keys
-    from bus.messages import WorldInfo
-    from bus.session import Shutdown, query_world_info
+    from swarmcover.bus.keys import Keys
+    from swarmcover.bus.messages import WorldInfo
+    from swarmcover.bus.session import Shutdown, query_world_info
     swarm = "wi" + uuid.uuid4().hex[:8]
     k = Keys(swarm)
     ask, serve_s = client_session(router, swarm), client_session(router, swarm)
@@ -189,7 +189,7 @@ def test_query_world_info_skips_invalid_replies_and_honours_stop(router, caplog)
 def test_run_node_hands_what_prepare_built_to_serve(router):
     """run_node's prepare: its value reaches serve as the fifth argument; a ValueError in it
     is exit 2 before any session (here: no router at the given endpoint)."""
-    from bus.node import run_node
+    from swarmcover.bus.node import run_node
     seen = []
 
     def serve(args, session, keys, stop, prepared):

@@ -71,7 +71,7 @@ def _own(name: str) -> set[str]:
 
 @pytest.mark.parametrize("words", SESSION_COMMANDS)
 def test_every_session_command_takes_every_shared_zenoh_flag(words):
-    from bus.session import ZENOH_FLAGS
+    from swarmcover.bus.session import ZENOH_FLAGS
     text = _help_of(words)
     zenoh_group = text.split("\nzenoh:\n", 1)
     assert len(zenoh_group) == 2, f"swarmcover {words} --help has no 'zenoh:' group"

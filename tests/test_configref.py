@@ -28,9 +28,9 @@ def _uncomment_optional(text: str) -> str:
 
 
 def test_defaults_parse_back_as_a_valid_config_with_every_default():
-    from agents.params import AgentParams, from_config
-    from coordinator.config import CoordinatorConfig
-    from world.config import RobotsConfig, SensingConfig, WorldConfig, loads_config
+    from swarmcover.agents.params import AgentParams, from_config
+    from swarmcover.coordinator.config import CoordinatorConfig
+    from swarmcover.world.config import RobotsConfig, SensingConfig, WorldConfig, loads_config
     text = defaults_toml()
     assert check_text(text) == ["map", "robots", "sensing", "world", "agent", "coordinator"]
     raw = tomllib.loads(text)
@@ -47,7 +47,7 @@ def test_defaults_parse_back_as_a_valid_config_with_every_default():
 
 
 def test_the_commented_hwbridge_tables_are_valid_once_uncommented():
-    from hwbridge.config import BridgeConfig, loads
+    from swarmcover.hwbridge.config import BridgeConfig, loads
     text = _uncomment_optional(defaults_toml())
     assert "hwbridge" in check_text(text)
     b = loads(text)
@@ -102,10 +102,10 @@ def test_examples_config_checks_and_topology_example_certifies():
 
 
 def test_completed_resolved_toml_holds_every_agent_and_coordinator_value():
-    from agents.params import AgentParams, from_config
-    from coordinator.config import CoordinatorConfig
+    from swarmcover.agents.params import AgentParams, from_config
+    from swarmcover.coordinator.config import CoordinatorConfig
     from swarmcover.configref import complete_resolved_toml
-    from world.config import load_config, to_toml
+    from swarmcover.world.config import load_config, to_toml
     cfg = load_config(ROOT / "configs" / "small.toml")
     full = complete_resolved_toml(to_toml(cfg))
     raw = tomllib.loads(full)
@@ -124,9 +124,9 @@ def test_completed_resolved_toml_holds_every_hwbridge_value_of_a_mixed_run():
     the transform) is written with the value used, and the file still validates as the same
     config. A robot's ``start`` has no value to write: unset, the fake robot starts at its
     source."""
-    from hwbridge.config import FAKE_KEYS, ROBOT_KEYS, TOP_KEYS, TRANSFORM_KEYS, from_dict
+    from swarmcover.hwbridge.config import FAKE_KEYS, ROBOT_KEYS, TOP_KEYS, TRANSFORM_KEYS, from_dict
     from swarmcover.configref import complete_resolved_toml
-    from world.config import load_config, loads_config, to_toml
+    from swarmcover.world.config import load_config, loads_config, to_toml
     src = ROOT / "configs" / "mixed.toml"
     cfg = load_config(src)
     full = complete_resolved_toml(to_toml(cfg), header="swarmcover run: wall timeout 8 s")

@@ -8,13 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bus.messages import Status
-from coordinator.actions import PublishComplex, SendTask, SpawnRobot
-from coordinator.config import CoordinatorConfig
-from coordinator.deployer import Deployer
+from swarmcover.bus.messages import Status
+from swarmcover.coordinator.actions import PublishComplex, SendTask, SpawnRobot
+from swarmcover.coordinator.config import CoordinatorConfig
+from swarmcover.coordinator.deployer import Deployer
 from swarmcover.simloop import SimLoop
-from world.config import load_config
-from world.groundtruth import coverage_fraction
+from swarmcover.world.config import load_config
+from swarmcover.world.groundtruth import coverage_fraction
 
 
 def _coverage(sim, res) -> float:
@@ -152,7 +152,7 @@ def test_a_fresh_coordinator_resumes_from_statuses():
 
 def _started_steps(monkeypatch):
     """Record (step name, step, job) for every step the deployer starts."""
-    from coordinator.pushes import Pushes
+    from swarmcover.coordinator.pushes import Pushes
     started = []
     orig_start = Pushes.start
 
@@ -249,7 +249,7 @@ def test_movers_on_one_landmark_settle_so_vertices_stay_put(tmp_path):
     """A mover whose other landmarks were moving (the source refilled behind it) homes on one
     bearing, which fixes a ray, not a point. Once its push is over it settles on all of its
     vertex's landmarks: where each vertex's later robots stand stays where its first stood."""
-    from coordinator.planner import plan_cycle
+    from swarmcover.coordinator.planner import plan_cycle
 
     cfg = load_config(_room6x4(tmp_path))
     p90 = {}
@@ -290,7 +290,7 @@ def test_lattice_placement_covers_the_room(tmp_path, monkeypatch):
     source (from the bearing-only shape estimate). On the 6 m x 4 m room it certifies full
     coverage. (It no longer uses fewer robots than the spec's 60-deg rule there: seeds 1-6,
     47.7 against 46.7, since failed test drives block only their own direction.)"""
-    import coordinator.pushes as pushes
+    import swarmcover.coordinator.pushes as pushes
 
     cfg = load_config(_room6x4(tmp_path))
     sim = SimLoop(cfg, seed=1, coordinator_overrides={"lattice": True})
@@ -322,8 +322,8 @@ def test_lattice_placement_covers_the_room(tmp_path, monkeypatch):
 
 def _job(path, *, feed=None, occ=None, enter=True):
     """A PushJob as the deployer builds it (robot ids = 100 + vertex unless ``occ``)."""
-    from coordinator.jobs import PushJob, Step
-    from coordinator.planner import JobSpec
+    from swarmcover.coordinator.jobs import PushJob, Step
+    from swarmcover.coordinator.planner import JobSpec
     occ = occ or {v: 100 + v for v in path}
     job = PushJob(JobSpec(path=list(path), direction=0.0, deploy_landmarks=[], deploy_bearings=[],
                           new_vertex=99, enter_source=0 if enter else None), feed=feed)
@@ -339,7 +339,7 @@ def _job(path, *, feed=None, occ=None, enter=True):
 
 
 def test_a_push_whose_test_drive_touched_hands_its_source_robot_to_the_next_push():
-    from coordinator.jobs import PushJob
+    from swarmcover.coordinator.jobs import PushJob
     src = PushJob.source_robot
     a = _job([0, 1, 2])
     b = _job([0, 3, 4], feed=a)
@@ -378,7 +378,7 @@ def test_the_contact_a_failed_test_drive_reports_is_never_taken_for_a_wall_at_th
     """The agent comes back from a test drive that touched with the contact still reported
     (pinned). The first status saying so used to be adopted as a resting contact before the
     job heard of the failure, and its 90-deg cone then closed a door (corridor_doors)."""
-    from bus.messages import Task
+    from swarmcover.bus.messages import Task
 
     dep = Deployer(CoordinatorConfig(), sources=[0.0])
     rid, v = 5, 12
@@ -406,7 +406,7 @@ def test_the_contact_a_failed_test_drive_reports_is_never_taken_for_a_wall_at_th
 @pytest.mark.slow
 @pytest.mark.timeout(240)
 def test_one_touch_at_the_front_no_longer_cancels_the_other_pushes_from_the_source(monkeypatch):
-    from coordinator.jobs import PushJob
+    from swarmcover.coordinator.jobs import PushJob
     cancelled = []
     cfg = load_config("configs/small.toml")
     sim = SimLoop(cfg, seed=0)

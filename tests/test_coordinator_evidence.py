@@ -9,8 +9,8 @@ import pytest
 
 from procs import LOCKSTEP_ROBOTS_TOML
 from swarmcover.simloop import SimLoop
-from world.config import load_config
-from world.groundtruth import coverage_fraction
+from swarmcover.world.config import load_config
+from swarmcover.world.groundtruth import coverage_fraction
 
 _BASE = """
 name = "{name}"

@@ -11,8 +11,8 @@ from pathlib import Path
 import msgpack
 import pytest
 
-from bus.messages import Clock, CmdVel, Sense, Status, decode
-from coordinator.node import ClockTrust, TickSync
+from swarmcover.bus.messages import Clock, CmdVel, Sense, Status, decode
+from swarmcover.coordinator.node import ClockTrust, TickSync
 from procs import client_session, free_port, wait_cycle
 
 KEYS = ("robots_used", "robots_spawned", "cycles", "sim_time_s", "coverage", "mean_spacing")
@@ -31,7 +31,7 @@ def _summary(out: Path) -> dict:
 def _inproc(config: str, seed: int) -> dict:
     from swarmcover.run import compute_summary
     from swarmcover.simloop import SimLoop
-    from world.config import load_config
+    from swarmcover.world.config import load_config
     cfg = load_config(config)
     sim = SimLoop(cfg, seed=seed)
     res = sim.run(max_sim_s=4000, max_wall_s=400)

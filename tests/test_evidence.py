@@ -13,14 +13,14 @@ import math
 import numpy as np
 import pytest
 
-from coordinator import build_complex, detect_fence, wrap
+from swarmcover.coordinator import build_complex, detect_fence, wrap
 from hypothesis import assume, given, settings, strategies as st
 
-from coordinator.topology.evidence import (Evidence, probe_depth_rv, probe_fractions, probe_key,
+from swarmcover.coordinator.topology.evidence import (Evidence, probe_depth_rv, probe_fractions, probe_key,
                                            tilted_door_rv)
-from coordinator.topology.params import TopologyParams
-from coordinator.planner import Snapshot, plan_cycle
-from coordinator.topology.targets import probe_via_bearings
+from swarmcover.coordinator.topology.params import TopologyParams
+from swarmcover.coordinator.planner import Snapshot, plan_cycle
+from swarmcover.coordinator.topology.targets import probe_via_bearings
 
 DEG = math.pi / 180
 

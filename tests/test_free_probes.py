@@ -11,16 +11,16 @@ import math
 
 import numpy as np
 
-from bus.messages import Status
-from coordinator import build_complex, detect_fence
-from coordinator.actions import SendTask
-from coordinator.config import CoordinatorConfig
-from coordinator.deployer import Deployer
-from coordinator.jobs import make_job
-from coordinator.roster import Robot
-from coordinator.topology.evidence import Evidence, probe_key
-from coordinator.topology.params import TopologyParams
-from coordinator.planner import Snapshot, plan_cycle, replan_push
+from swarmcover.bus.messages import Status
+from swarmcover.coordinator import build_complex, detect_fence
+from swarmcover.coordinator.actions import SendTask
+from swarmcover.coordinator.config import CoordinatorConfig
+from swarmcover.coordinator.deployer import Deployer
+from swarmcover.coordinator.jobs import make_job
+from swarmcover.coordinator.roster import Robot
+from swarmcover.coordinator.topology.evidence import Evidence, probe_key
+from swarmcover.coordinator.topology.params import TopologyParams
+from swarmcover.coordinator.planner import Snapshot, plan_cycle, replan_push
 
 DEG = math.pi / 180
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from ground.angles import PI, circmean, circular_mean, side, side_array, wrap, wrap_array
+from swarmcover.ground.angles import PI, circmean, circular_mean, side, side_array, wrap, wrap_array
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("agents", "bus", "coordinator", "ground", "hwbridge", "swarmcover", "viz", "world", "bench")
@@ -99,7 +99,7 @@ def test_geometry_helpers_are_defined_once_in_the_ground_floor():
 
 
 def test_rings_to_segments_of_a_square_a_repeated_vertex_and_nothing():
-    from ground.geometry import rings_to_segments
+    from swarmcover.ground.geometry import rings_to_segments
     sq = [[0, 0], [1, 0], [1, 1], [0, 1]]
     w = rings_to_segments([sq])
     assert w.dtype == np.float64 and w.flags.c_contiguous
@@ -116,7 +116,7 @@ coords = st.floats(-100, 100, allow_nan=False).map(lambda v: round(v, 1))
 
 @given(st.lists(st.lists(st.tuples(coords, coords), max_size=7), max_size=4))
 def test_rings_to_segments_is_every_nonzero_edge_in_ring_order(rings):
-    from ground.geometry import rings_to_segments
+    from swarmcover.ground.geometry import rings_to_segments
     want = [[*r[k], *r[(k + 1) % len(r)]] for r in rings if len(r) >= 2 for k in range(len(r))
             if r[k] != r[(k + 1) % len(r)]]
     w = rings_to_segments(rings)
@@ -124,7 +124,7 @@ def test_rings_to_segments_is_every_nonzero_edge_in_ring_order(rings):
 
 
 def test_flat_to_points_pairs_floats_and_drops_an_odd_tail():
-    from ground.geometry import flat_to_points
+    from swarmcover.ground.geometry import flat_to_points
     assert flat_to_points([0, 1, 2.5, 3, 4]) == ((0.0, 1.0), (2.5, 3.0))
     assert all(type(c) is float for p in flat_to_points([1, 2]) for c in p)
     assert flat_to_points([]) == () and flat_to_points([7.0]) == ()
@@ -156,7 +156,7 @@ _values = st.recursive(_scalars, lambda inner: st.lists(inner, max_size=4)
 def test_dumps_toml_round_trips_through_tomllib(d):
     import tomllib
 
-    from ground.toml import dumps_toml
+    from swarmcover.ground.toml import dumps_toml
     assert tomllib.loads(dumps_toml(d)) == d
 
 
@@ -168,8 +168,8 @@ def test_scalar_polygon_forms_agree_with_the_world_s_array_forms(rays, points):
     """ground.geometry's pure-Python point_in_polygon, signed_area and edge_distance (the
     bridge's geofence, config checks) against world/maps.py's vectorised forms, on star-shaped
     polygons (vertices sorted by angle around the origin), random points off the edges."""
-    from ground.geometry import edge_distance, point_in_polygon, rings_to_segments, signed_area
-    from world.maps import point_segment_distance, points_in_polygon, polygon_area
+    from swarmcover.ground.geometry import edge_distance, point_in_polygon, rings_to_segments, signed_area
+    from swarmcover.world.maps import point_segment_distance, points_in_polygon, polygon_area
     poly = [(r * math.cos(a), r * math.sin(a)) for r, a in sorted(rays, key=lambda p: p[1])]
     assert math.isclose(abs(signed_area(poly)), polygon_area(poly), rel_tol=1e-9, abs_tol=1e-9)
     walls = rings_to_segments([poly])

@@ -10,21 +10,21 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hwbridge import config as hwconfig
-from hwbridge.frames import (Transform2D, from_plane, mocap_to_world, to_plane, world_to_mocap,
+from swarmcover.hwbridge import config as hwconfig
+from swarmcover.hwbridge.frames import (Transform2D, from_plane, mocap_to_world, to_plane, world_to_mocap,
                              wrap)
-from hwbridge.metrics import (TrackLog, estimate_lag, formation_discrepancy, percentile,
+from swarmcover.hwbridge.metrics import (TrackLog, estimate_lag, formation_discrepancy, percentile,
                               summary)
-from hwbridge.mocap import (INSTALL_HINT, LibMotionCaptureSource, RateMonitor,
+from swarmcover.hwbridge.mocap import (INSTALL_HINT, LibMotionCaptureSource, RateMonitor,
                             ScriptedMocapSource, Trajectory, import_motioncapture,
                             samples_from_rigid_bodies)
-from hwbridge.output import to_unicycle
-from hwbridge.ros2 import (CdrError, PoseStamped, Twist, cmd_vel_key, decode_pose_stamped,
+from swarmcover.hwbridge.output import to_unicycle
+from swarmcover.hwbridge.ros2 import (CdrError, PoseStamped, Twist, cmd_vel_key, decode_pose_stamped,
                            decode_twist, encode_pose_stamped, encode_twist, rmw_zenoh_attachment,
                            rmw_zenoh_key, ros2dds_key, topic_name)
-from hwbridge.safety import (Gates, Limits, SafetyGate, clamp_unicycle, edge_distance,
+from swarmcover.hwbridge.safety import (Gates, Limits, SafetyGate, clamp_unicycle, edge_distance,
                              inside_fence, point_in_polygon)
-from hwbridge.twin import TwinGains, VelocityEstimator, integrate, twin_command
+from swarmcover.hwbridge.twin import TwinGains, VelocityEstimator, integrate, twin_command
 
 finite = st.floats(-50, 50, allow_nan=False)
 angle = st.floats(-math.pi, math.pi, exclude_max=True)
@@ -708,7 +708,7 @@ def _drive(sim, v, w, seconds, dt=0.005, t0=0.0):
 
 
 def test_room_pushes_the_body_out_of_walls_and_corners():
-    from hwbridge.room import Room
+    from swarmcover.hwbridge.room import Room
     room = Room.from_polygons(ROOM_BOX, [[(1, 1), (1.5, 1), (1.5, 1.5), (1, 1.5)]], radius=0.06)
     assert len(room) == 8
     assert room.collide(1.0, 0.5) == (1.0, 0.5, False)            # free: untouched
@@ -730,8 +730,8 @@ def test_walled_stand_in_never_leaves_the_map(theta, v, w, dt):
     """A stand-in driven at (and through) the walls for seconds stays inside, its centre at
     least the body radius from every wall -- so a geofence at the map boundary never trips
     for a robot that only touches walls, whatever the control period (dt up to 0.2 s)."""
-    from hwbridge.fake_robot import DiffDriveSim, DriveParams
-    from hwbridge.room import Room
+    from swarmcover.hwbridge.fake_robot import DiffDriveSim, DriveParams
+    from swarmcover.hwbridge.room import Room
     room = Room.from_polygons(ROOM_BOX, radius=0.06)
     sim = DiffDriveSim((0.3, 1.0, theta), DriveParams(latency_s=0.0), seed=1, room=room)
     _drive(sim, v, w, 8.0, dt=dt)
@@ -741,8 +741,8 @@ def test_walled_stand_in_never_leaves_the_map(theta, v, w, dt):
 
 
 def test_stand_in_slides_along_a_wall_and_backs_off_it():
-    from hwbridge.fake_robot import DiffDriveSim, DriveParams
-    from hwbridge.room import Room
+    from swarmcover.hwbridge.fake_robot import DiffDriveSim, DriveParams
+    from swarmcover.hwbridge.room import Room
     room = Room.from_polygons(ROOM_BOX, radius=0.06)
     p = DriveParams(latency_s=0.0, v_noise=0.0, w_noise=0.0, slip=0.0)
     sim = DiffDriveSim((0.3, 0.4, math.pi - 0.3), p, room=room)     # toward the left wall
@@ -768,7 +768,7 @@ def test_geofence_passes_a_robot_touching_the_wall_and_stops_one_beyond_it():
 
 
 def test_stand_in_room_comes_from_the_run_config_map(tmp_path):
-    from hwbridge.fake_robot import make_room
+    from swarmcover.hwbridge.fake_robot import make_room
     cfg = tmp_path / "room.toml"
     cfg.write_text('name = "room"\nrv = 1.0\n[map]\nboundary = [[0, 0], [2.5, 0], [2.5, 2], [0, 2]]\n'
                    'obstacles = [{type = "rect", min = [1, 1], max = [1.5, 1.5]}]\n'

@@ -17,10 +17,10 @@ from pathlib import Path
 import msgpack
 import pytest
 
-from bus.keys import Keys
-from bus.messages import CmdVel, LiveCmd, MocapPose, WireError, decode
-from hwbridge.config import ConfigError, loads
-from hwbridge.driver import CommandExpiry
+from swarmcover.bus.keys import Keys
+from swarmcover.bus.messages import CmdVel, LiveCmd, MocapPose, WireError, decode
+from swarmcover.hwbridge.config import ConfigError, loads
+from swarmcover.hwbridge.driver import CommandExpiry
 from procs import client_session, free_port, toml_tables, wait_until
 
 pytestmark = pytest.mark.timeout(120)
@@ -203,7 +203,7 @@ def test_ctrl_c_on_a_mixed_run_stops_live_robots_first(procs, tmp_path):
     """SIGINT to `swarmcover run configs/mixed.toml` while a live robot drives: zeros reach
     the live robots at once and are their last word; agents and coordinator stop before
     final.png is drawn (issue 22: non-zero commands went on 1.2-1.6 s, past final.png)."""
-    from hwbridge.ros2 import cmd_vel_key, decode_twist
+    from swarmcover.hwbridge.ros2 import cmd_vel_key, decode_twist
     root = Path(__file__).resolve().parent.parent
     port, swarm, out = free_port(), "ci" + os.urandom(4).hex(), tmp_path / "run"
     run = procs.swarmcover("run", root / "configs" / "mixed.toml", "--out", out, "--port", port,

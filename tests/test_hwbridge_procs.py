@@ -11,9 +11,9 @@ import time
 
 import pytest
 
-from bus.keys import Keys
-from bus.messages import CmdVel, LiveCmd, Pose, decode
-from hwbridge.ros2 import cmd_vel_key, decode_twist
+from swarmcover.bus.keys import Keys
+from swarmcover.bus.messages import CmdVel, LiveCmd, Pose, decode
+from swarmcover.hwbridge.ros2 import cmd_vel_key, decode_twist
 from procs import client_session, wait_until
 
 pytestmark = pytest.mark.timeout(120)
@@ -249,8 +249,8 @@ body = "scarab5"
 
 def test_ros2_pose_stamped_mocap_source(procs, router, zargs, tmp_path):
     """A ROS 2 mocap node seen through zenoh-bridge-ros2dds: CDR PoseStamped on a raw key."""
-    from hwbridge.frames import Transform2D, world_to_mocap
-    from hwbridge.ros2 import PoseStamped, encode_pose_stamped
+    from swarmcover.hwbridge.frames import Transform2D, world_to_mocap
+    from swarmcover.hwbridge.ros2 import PoseStamped, encode_pose_stamped
     cfg = tmp_path / "ros_mocap.toml"
     cfg.write_text(POSE_STAMPED_CONFIG)
     swarm = zargs[zargs.index("--swarm") + 1]

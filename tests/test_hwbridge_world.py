@@ -11,11 +11,11 @@ import time
 
 import pytest
 
-from bus.keys import Keys
-from bus.messages import CmdVel, Pose, Truth, decode
+from swarmcover.bus.keys import Keys
+from swarmcover.bus.messages import CmdVel, Pose, Truth, decode
 from procs import client_session
 
-pytest.importorskip("world.node")
+pytest.importorskip("swarmcover.world.node")
 pytestmark = pytest.mark.timeout(120)
 
 WORLD = """

@@ -25,8 +25,8 @@ sys.path.insert(0, str(ROOT))
 from bench.faults import (FaultProxy, clocked_config, fuzz_processes, fuzz_targets, invalid_payloads,  # noqa: E402
                           lossy_run, loss_stall, netns_loss_run, read_counters, restart_run,
                           send_fuzz, wait_quiet)
-from bus.keys import Keys  # noqa: E402
-from bus.messages import ALL_MESSAGES, WireError, decode  # noqa: E402
+from swarmcover.bus.keys import Keys  # noqa: E402
+from swarmcover.bus.messages import ALL_MESSAGES, WireError, decode  # noqa: E402
 
 # tiny, lockstep, one router outage: 69-119 s measured here; a CI run once needed > 120 s
 # (24 cycles) and its guard skipped the certification check
@@ -80,7 +80,7 @@ def _echo_server():
 def test_the_realtime_variant_of_a_config_loads_with_the_real_time_clock(tmp_path):
     """bench/faults.py --realtime runs a copy of the config on the real-time clock; a ROS
     map path is made absolute so the copy reads the same map."""
-    from world.config import load_config
+    from swarmcover.world.config import load_config
     assert clocked_config("configs/tiny.toml", tmp_path, realtime=False) == "configs/tiny.toml"
     for name in ("tiny", "office_ros"):
         path = clocked_config(f"configs/{name}.toml", tmp_path, realtime=True, rtf=2.0)

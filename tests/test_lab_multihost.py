@@ -100,9 +100,9 @@ _VERDICT: dict = {}    # the plain run's outcome: a non-certifying coordinator i
 @pytest.mark.parametrize("secure", [False, pytest.param(True, marks=pytest.mark.slow)],
                          ids=["plain", "secure"])
 def test_router_world_and_agents_on_three_hosts(procs, lab, tmp_path, secure):
-    from bus.keys import Keys
-    from bus.messages import Spawn
-    from bus.session import Mailbox, Receiver, add_zenoh_args, open_session
+    from swarmcover.bus.keys import Keys
+    from swarmcover.bus.messages import Spawn
+    from swarmcover.bus.session import Mailbox, Receiver, add_zenoh_args, open_session
     swarm = "t" + uuid.uuid4().hex[:8]
     ep = {k: f"tcp/{lab.addr(k, 1)}:7447" for k in range(3)}   # router as seen from W, A, host
     sec: list[str] = []

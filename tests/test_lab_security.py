@@ -13,10 +13,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bus.keys import TOPICS, Keys
-from bus.messages import CmdVel, LiveCmd, Sense
-from bus.security import SecurityError, config_inserts, identity_name, infer_role
-from bus.session import add_zenoh_args, make_config, open_session
+from swarmcover.bus.keys import TOPICS, Keys
+from swarmcover.bus.messages import CmdVel, LiveCmd, Sense
+from swarmcover.bus.security import SecurityError, config_inserts, identity_name, infer_role
+from swarmcover.bus.session import add_zenoh_args, make_config, open_session
 from procs import free_port
 from swarmcover.secure import (acl_config, allows, describe, export_profile, identities,
                                init_profile)
@@ -255,7 +255,7 @@ def test_a_viewers_command_is_dropped_and_the_live_robot_never_sees_it(procs, se
               for i in (1, 2)]
     for i, r in zip((1, 2), robots):
         r.wait_line(f"READY fake-robot {i}", timeout=30)
-    from hwbridge.ros2 import Twist, encode_twist
+    from swarmcover.hwbridge.ros2 import Twist, encode_twist
     k = Keys(swarm)
     live = LiveCmd(robot=1, t=0.0, v=0.2, omega=0.1).encode()
     twist = encode_twist(Twist(lx=0.2, az=0.1))
@@ -320,7 +320,7 @@ def test_an_agent_cannot_publish_another_robots_command(secure_router, profile, 
         world.put(k.sense(7), Sense(robot=7, tick=6).encode())  # the world's: delivered
         a3.liveliness().declare_token(k.alive("robot", 7))      # impersonation: dropped
         time.sleep(1.0)
-        from bus.messages import decode
+        from swarmcover.bus.messages import decode
         got = sorted((key.split("/")[-2], decode(p).tick) for key, p in cmds)
         assert got == [("3", 3), ("7", 4)], got
         assert [decode(p).tick for _, p in senses] == [6]
@@ -389,7 +389,7 @@ def test_generated_router_config_works_as_a_drop_in_router(procs, profile, tmp_p
         viewer.put(k.cmd_vel(2), CmdVel(robot=2, tick=1).encode())
         a2.put(k.cmd_vel(2), CmdVel(robot=2, tick=2).encode())
         time.sleep(1.0)
-        from bus.messages import decode
+        from swarmcover.bus.messages import decode
         assert [decode(p).tick for _, p in got] == [2]
         sub.undeclare()
     finally:

@@ -18,16 +18,49 @@ NEVER = {
 }
 
 
-def _imported_packages(path: Path) -> set[str]:
-    out = set()
+# the card's folders, installed as swarmcover.<name> (pyproject.toml's package-dir)
+FLOORS = ("agents", "bus", "coordinator", "ground", "hwbridge", "viz", "world")
+
+
+def _package(module: str) -> str:
+    """The house's package of an absolute module name: swarmcover.world.core -> world,
+    swarmcover.run -> swarmcover, numpy.linalg -> numpy."""
+    parts = module.split(".")
+    if parts[0] == "swarmcover" and len(parts) > 1 and parts[1] in FLOORS:
+        return parts[1]
+    return parts[0]
+
+
+def _absolute_imports(path: Path) -> list[str]:
+    out = []
     for node in ast.walk(ast.parse(path.read_text(), str(path))):
         if isinstance(node, ast.Import):
-            out |= {a.name.split(".")[0] for a in node.names}
+            out += [a.name for a in node.names]
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            out.add(node.module.split(".")[0])
-        elif isinstance(node, ast.ImportFrom) and node.level >= 2:
+            out.append(node.module)
+    return out
+
+
+def _imported_packages(path: Path) -> set[str]:
+    out = {_package(m) for m in _absolute_imports(path)}
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.ImportFrom) and node.level >= 2:
             out.add("..")  # out of its own package: upwards, as far as this check knows
     return out
+
+
+def _sources() -> list[Path]:
+    return sorted(p for d in (*FLOORS, "swarmcover", "bench", "tests", "examples")
+                  for p in (ROOT / d).rglob("*.py"))
+
+
+def test_no_bare_import_of_a_floor():
+    """Every import of the card's folders goes through the swarmcover namespace: a bare
+    `import agents` or `from world import ...` would load another distribution's package
+    of that name (or a second copy of ours)."""
+    bad = [f"{p.relative_to(ROOT)}: {m}" for p in _sources() for m in _absolute_imports(p)
+           if m.split(".")[0] in FLOORS]
+    assert not bad, "; ".join(bad)
 
 
 def test_lower_floors_never_import_upper_ones():
@@ -47,5 +80,7 @@ def test_the_check_sees_an_import_inside_a_function_and_one_upwards(tmp_path):
     f = tmp_path / "m.py"
     f.write_text("def g():\n    from swarmcover.replay import read_messages\n")
     assert "swarmcover" in _imported_packages(f)
+    f.write_text("import swarmcover.agents.node as n\nfrom swarmcover.world import core\n")
+    assert _imported_packages(f) == {"agents", "world"}
     f.write_text("from ..deployer import Deployer\n")
     assert ".." in _imported_packages(f)

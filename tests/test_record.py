@@ -14,17 +14,17 @@ from collections import defaultdict
 import pytest
 from mcap.reader import make_reader
 
-from bus import messages as m
-from bus.keys import Keys
-from bus.session import Mailbox
+from swarmcover.bus import messages as m
+from swarmcover.bus.keys import Keys
+from swarmcover.bus.session import Mailbox
 from procs import client_session
 from swarmcover.record import (McapSink, Recorder, json_to_payload, payload_to_json,
                                resolve_keyexpr, schema_for)
 from swarmcover.replay import (JsonDecoderFactory, read_messages, recorded_swarm, remap_key,
                                summary_counts)
-from viz.synth import Scenario
+from swarmcover.viz.synth import Scenario
 
-SYNTH = [sys.executable, "-m", "viz.synth"]
+SYNTH = [sys.executable, "-m", "swarmcover.viz.synth"]
 
 
 # --------------------------------------------------------------------------- pure parts
@@ -370,7 +370,7 @@ import sys, time
 sys.path.insert(0, 'tests')
 from procs import client_session
 from swarmcover.record import Recorder
-from bus import messages as m
+from swarmcover.bus import messages as m
 s = client_session({router!r}, 'forgot')
 rec = Recorder(s, 'sc/forgot/**', {str(out)!r}).start()
 time.sleep(0.3)

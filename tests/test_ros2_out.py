@@ -9,13 +9,13 @@ import time
 
 import pytest
 
-from bus.session import Mailbox
+from swarmcover.bus.session import Mailbox
 from procs import client_session, free_port
 from swarmcover.ros2 import (MARKER_ARRAY, POSE_ARRAY, data_key, deserialize, dds_type,
                              marker_array, pose_array, serialize, type_hash)
-from viz.synth import Scenario
+from swarmcover.viz.synth import Scenario
 
-SYNTH = [sys.executable, "-m", "viz.synth"]
+SYNTH = [sys.executable, "-m", "swarmcover.viz.synth"]
 CYCLES, KILL = 8, (5, 2)
 
 
@@ -98,7 +98,7 @@ def test_bad_ros_namespace_is_a_clear_error(router, procs):
 
 
 def test_hwbridge_twist_is_rosbags_cdr_byte_for_byte():
-    from hwbridge.ros2 import CDR_LE, Twist, encode_twist
+    from swarmcover.hwbridge.ros2 import CDR_LE, Twist, encode_twist
     data = encode_twist(Twist(lx=0.3, az=-1.2))
     tw = deserialize(data, "geometry_msgs/msg/Twist")
     assert (tw.linear.x, tw.angular.z) == (0.3, -1.2)

@@ -98,7 +98,7 @@ def test_killed_agents_and_coordinator_are_healed(procs, tmp_path):
 
 def test_live_agents_plan_with_the_bridge_limits_and_a_bad_bridge_stops_run_first(tmp_path,
                                                                                   capsys):
-    from bus.messages import Spawn
+    from swarmcover.bus.messages import Spawn
     from swarmcover.run import _agent_args, _live_limits, build_parser, main, resolve_config
     args = build_parser().parse_args(["configs/mixed.toml"])
     cfg, resolved = resolve_config("configs/mixed.toml", args)
@@ -164,7 +164,7 @@ def test_shared_flags_that_contradict_run_exit_2_naming_them(tmp_path, flags, ne
 
 
 def test_children_get_the_shared_flags_and_the_router_its_endpoints():
-    from bus.session import zenoh_argv
+    from swarmcover.bus.session import zenoh_argv
     from swarmcover.run import _local, _router_args, build_parser, session_args
     args = build_parser().parse_args([
         "configs/tiny.toml", "--listen", "tcp/0.0.0.0:7999", "--cfg", "transport/link/tx/lease:9000",

@@ -21,7 +21,7 @@ def _strict(path: Path) -> dict:
 
 
 def _forged_certificate():
-    from bus.messages import Complex
+    from swarmcover.bus.messages import Complex
     # a well-formed certified square: what one packet needed to end a run "CERTIFIED"
     return Complex(cycle=99, epoch=1, vertices=[0, 1, 2, 3], occupants=[0, 1, 2, 3],
                    edges=[0, 1, 0, 2, 1, 2, 1, 3, 2, 3], triangles=[0, 1, 2, 1, 2, 3],
@@ -32,8 +32,8 @@ def _forged_certificate():
 @pytest.mark.timeout(150)
 def test_forged_certificate_and_spawn_are_refused_and_the_run_ends_with_the_true_answer(
         procs, tmp_path):
-    from bus.keys import Keys
-    from bus.messages import Spawn
+    from swarmcover.bus.keys import Keys
+    from swarmcover.bus.messages import Spawn
     out = tmp_path / "run"
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"
@@ -64,7 +64,7 @@ def test_forged_certificate_and_spawn_are_refused_and_the_run_ends_with_the_true
         s2.close()
         import argparse
 
-        from bus.session import add_zenoh_args, open_session
+        from swarmcover.bus.session import add_zenoh_args, open_session
         ap = argparse.ArgumentParser()
         add_zenoh_args(ap)
         s2 = open_session(ap.parse_args(["--connect", ep, "--swarm", "tiny",

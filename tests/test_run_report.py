@@ -10,13 +10,13 @@ import math
 import numpy as np
 import pytest
 
-from bus.messages import Complex, Truth
+from swarmcover.bus.messages import Complex, Truth
 from swarmcover.recheck import recheck
 from swarmcover.run import (RunState, StallWatch, compute_summary, default_robots_max,
                             resolve_config, build_parser, strict_json, twin_tracking)
-from world.config import load_config
-from world.groundtruth import coverage_fraction, euler_bound, reachable_uncovered
-from world.maps import WorldMap, build_map
+from swarmcover.world.config import load_config
+from swarmcover.world.groundtruth import coverage_fraction, euler_bound, reachable_uncovered
+from swarmcover.world.maps import WorldMap, build_map
 
 
 def _strict(text: str):
@@ -194,8 +194,8 @@ def test_recheck_accepts_the_pillar_hall_end_state_whose_fence_crosses_itself():
     side closed) and refuse it when a stretch of the fence is missing."""
     from pathlib import Path
 
-    from coordinator import build_complex, certify, detect_fence
-    from coordinator.topology.params import TopologyParams
+    from swarmcover.coordinator import build_complex, certify, detect_fence
+    from swarmcover.coordinator.topology.params import TopologyParams
     d = json.loads((Path(__file__).parent / "data" / "pillar_hall_end.json").read_text())
     reps = {int(k): {"neighbours": {int(a): b for a, b in v["neighbours"].items()},
                      "touch": v["touch"],
@@ -230,7 +230,7 @@ def test_recheck_accepts_the_pillar_hall_end_state_whose_fence_crosses_itself():
 
 
 def test_only_the_coordinators_session_with_the_run_key_is_believed():
-    from bus.trust import mac, new_key
+    from swarmcover.bus.trust import mac, new_key
     from swarmcover.run import _Coordinator
     key = bytes.fromhex(new_key())
     c = _Coordinator(key)
@@ -254,9 +254,9 @@ def test_final_png_marks_the_robots_the_run_saw_removed_as_redundant():
     (the `plot` command's, the GIF's and the live views' mark), not as a hollow robot."""
     from types import SimpleNamespace
 
-    from bus.messages import WorldInfo
+    from swarmcover.bus.messages import WorldInfo
     from swarmcover.run import final_figure
-    from viz.figures import COLORS
+    from swarmcover.viz.figures import COLORS
     tri = dict(edges=[0, 1, 0, 2, 1, 2], triangles=[0, 1, 2], obstacle=[0, 1])
     state = RunState(info=WorldInfo(name="room", rv=1.0, robot_radius=0.06, dt=0.05,
                                     boundary=[-1, -1, 5, -1, 5, 4, -1, 4], obstacles=[],

@@ -15,7 +15,7 @@ from hypothesis import given, settings, strategies as st
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from coordinator import (TopologyParams, boundary_of, build_complex, certify, closure_zone, detect_fence,
+from swarmcover.coordinator import (TopologyParams, boundary_of, build_complex, certify, closure_zone, detect_fence,
                          is_cocycle, verify_certificate)
 from test_topology_geom import boundary_edges_near, lattice, reports
 
@@ -645,7 +645,7 @@ def campaign_case(seed, drop_fence_edge=False):
     P, reps, polys, W, H, segs = campaign_sample(seed)
     cx = build_complex(reps)
     pos = P[cx.index(cx.ids)]
-    from coordinator.topology.evidence import Evidence
+    from swarmcover.coordinator.topology.evidence import Evidence
     ev = Evidence(door_min_rv=0.4, robot_radius_rv=0.06)
     for _ in range(12):
         fence = detect_fence(cx, **ev.fence_kwargs())
@@ -767,7 +767,7 @@ def test_a_closure_adds_edges_before_it_drops_an_edge_with_one_triangle():
     both would leave nothing, a certificate from nothing (the forged-Complex re-check of
     tests/test_run_report.py hit it). certify searches the narrower zone first, where only
     fold edges (two or more triangles) may leave the target: the closure adds the diagonal."""
-    from coordinator.topology.complex import Complex as TopoComplex
+    from swarmcover.coordinator.topology.complex import Complex as TopoComplex
     ids = np.arange(4)
     edges = np.array([[0, 1], [0, 2], [1, 2], [1, 3], [2, 3]])
     tris = np.array([[0, 1, 2], [1, 2, 3]])
@@ -787,7 +787,7 @@ def test_a_one_sided_edge_crossed_by_others_may_leave_the_target():
     one-sided with one triangle, yet three edges cross it (it lies inside the union).
     The whole zone may drop it, and certify then certifies; no closure in the narrower
     zone exists (the obstruction proves it)."""
-    from coordinator.topology.solver import _Solver
+    from swarmcover.coordinator.topology.solver import _Solver
     d, cx, eids = _end_state("truth_s1_map49_crossing.json")
     raw = eids(d["z_raw"])
     fence = SimpleNamespace(z_raw=raw, z_repair=eids(d["z_repair"]))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from coordinator import RobotReport, add_robot, build_complex, remove_robot
+from swarmcover.coordinator import RobotReport, add_robot, build_complex, remove_robot
 from test_topology_geom import reports, visible_pairs
 
 points = st.integers(min_value=0, max_value=2**32 - 1).map(np.random.default_rng)

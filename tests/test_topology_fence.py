@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from coordinator import TopologyParams, build_complex, certify, detect_fence, verify_certificate, wrap
-from coordinator.topology.evidence import Evidence
+from swarmcover.coordinator import TopologyParams, build_complex, certify, detect_fence, verify_certificate, wrap
+from swarmcover.coordinator.topology.evidence import Evidence
 from test_topology_geom import boundary_edges_near, lattice, reports
 
 DEG = math.pi / 180

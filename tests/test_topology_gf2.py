@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from coordinator.topology import gf2
+from swarmcover.coordinator.topology import gf2
 
 
 def _dense_rank(M: np.ndarray) -> int:

@@ -8,7 +8,7 @@ import pytest
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from coordinator import (
+from swarmcover.coordinator import (
     TopologyParams,
     build_complex,
     compute_gvg,
@@ -206,7 +206,7 @@ def test_gvg_thinning_collapses_a_band_but_keeps_it_connected():
 
 
 def test_obstacle_segments_label_components():
-    from coordinator import obstacle_segments
+    from swarmcover.coordinator import obstacle_segments
 
     P = lattice(5, 12, 0.8)
     cx = build_complex(reports(P))

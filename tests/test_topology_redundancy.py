@@ -6,8 +6,8 @@ from hypothesis import given, settings, strategies as st
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from coordinator import build_complex, certify, detect_fence, find_redundant, remove_robot, verify_certificate
-from coordinator.topology.redundancy import link_is_acyclic
+from swarmcover.coordinator import build_complex, certify, detect_fence, find_redundant, remove_robot, verify_certificate
+from swarmcover.coordinator.topology.redundancy import link_is_acyclic
 from test_topology_geom import lattice, reports
 
 seeds = st.integers(min_value=0, max_value=2**32 - 1)
@@ -118,7 +118,7 @@ def test_removal_keeps_a_closed_certificate_valid_for_the_fence():
     import json
     from pathlib import Path
 
-    from coordinator import TopologyParams
+    from swarmcover.coordinator import TopologyParams
 
     d = json.loads((Path(__file__).parent / "data" / "pillar_hall_end.json").read_text())
     reps = {int(v): {"neighbours": {int(k): b for k, b in r["neighbours"].items()},

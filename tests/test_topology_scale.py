@@ -25,10 +25,10 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.cycle import closing_evidence, make_state  # noqa: E402
-from coordinator.topology.complex import RobotReport, build_complex  # noqa: E402
-from coordinator.config import CoordinatorConfig  # noqa: E402
-from coordinator.planner import Snapshot, plan_cycle  # noqa: E402
-from coordinator.topology.shape import _DENSE_MAX, _estimate_shape_dense, estimate_shape  # noqa: E402
+from swarmcover.coordinator.topology.complex import RobotReport, build_complex  # noqa: E402
+from swarmcover.coordinator.config import CoordinatorConfig  # noqa: E402
+from swarmcover.coordinator.planner import Snapshot, plan_cycle  # noqa: E402
+from swarmcover.coordinator.topology.shape import _DENSE_MAX, _estimate_shape_dense, estimate_shape  # noqa: E402
 
 CFG = CoordinatorConfig()
 P = CFG.topology()
@@ -150,8 +150,8 @@ def test_plan_cycle_equals_the_straightforward_computation(states, kind, monkeyp
     """The whole cycle on the current fence rules (probes, evidence), optimised against
     the straightforward paths: dense shape estimate, every report through as_report, no
     quick rejection in the redundancy pass."""
-    from coordinator.topology import complex as cmod
-    from coordinator.topology import redundancy, shape
+    from swarmcover.coordinator.topology import complex as cmod
+    from swarmcover.coordinator.topology import redundancy, shape
 
     _, h, tdf, ev, rep = states[kind]
     fast = _summary(_plan(snapshot(rep, h), tdf, ev))
@@ -171,7 +171,7 @@ def _redundancy_cases(states):
     bench/topology.py's lattice with holes at 0.61 rv spacing (some 4-cliques) and its
     dense random swarm (all in 4-cliques, many redundant robots)."""
     from bench.topology import dense_swarm, lattice_swarm, reports_from_points
-    from coordinator import certify, detect_fence
+    from swarmcover.coordinator import certify, detect_fence
 
     sw, h, tdf, ev, rep = states["closed"]
     cx = build_complex(rep)
@@ -188,7 +188,7 @@ def test_find_redundant_quick_rejection_changes_nothing(states, monkeypatch):
     """find_redundant rejects robots whose link has a cycle and no triangle without the
     link test; with that shortcut off (every robot taken for one in a 4-clique) it must
     remove the same robots, run as many tests and reroute to the same chain."""
-    from coordinator.topology import redundancy
+    from swarmcover.coordinator.topology import redundancy
 
     removed_any = 0
     for cx, fence, cert in _redundancy_cases(states):
@@ -206,7 +206,7 @@ def test_find_redundant_quick_rejection_changes_nothing(states, monkeypatch):
 
 def test_four_cliques_found():
     from bench.topology import dense_swarm, reports_from_points
-    from coordinator.topology.redundancy import _in_four_clique
+    from swarmcover.coordinator.topology.redundancy import _in_four_clique
 
     cx = build_complex(reports_from_points(dense_swarm(200, np.random.default_rng(2), degree=5)))
     adj = cx.adjacency_sets()

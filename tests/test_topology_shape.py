@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from coordinator.topology.shape import Lattice, align_headings, estimate_shape, lattice_target
+from swarmcover.coordinator.topology.shape import Lattice, align_headings, estimate_shape, lattice_target
 
 
 def _scatter(seed: int, n: int, rv: float = 1.0):
@@ -134,7 +134,7 @@ def test_lattice_target_avoids_the_cone_of_a_felt_wall():
 def _lattice_snapshot(spacing=0.95, jitter=0.0, seed=0):
     """A 4 x 3 lattice patch at ``spacing`` through the source vertex 0, axis along the
     source heading (pi), as the robots would report it."""
-    from coordinator.planner import Snapshot
+    from swarmcover.coordinator.planner import Snapshot
     rng = np.random.default_rng(seed)
     a1 = spacing * np.array([-1.0, 0.0])
     a2 = spacing * np.array([math.cos(math.pi + math.pi / 3), math.sin(math.pi + math.pi / 3)])
@@ -154,8 +154,8 @@ def _lattice_snapshot(spacing=0.95, jitter=0.0, seed=0):
 
 
 def test_the_planner_sends_new_robots_to_free_lattice_points():
-    from coordinator.topology.params import TopologyParams
-    from coordinator.planner import plan_cycle
+    from swarmcover.coordinator.topology.params import TopologyParams
+    from swarmcover.coordinator.planner import plan_cycle
     spacing = 0.95
     snap, P = _lattice_snapshot(spacing)
     plan = plan_cycle(snap, TopologyParams(), cycle=1, redundancy=False, test_drive_failures={},
@@ -186,8 +186,8 @@ def test_the_planner_sends_new_robots_to_free_lattice_points():
 
 
 def test_without_a_lattice_the_planner_keeps_the_spec_rule():
-    from coordinator.topology.params import TopologyParams
-    from coordinator.planner import plan_cycle
+    from swarmcover.coordinator.topology.params import TopologyParams
+    from swarmcover.coordinator.planner import plan_cycle
     snap, P = _lattice_snapshot(0.95)
     plan = plan_cycle(snap, TopologyParams(), cycle=1, redundancy=False, test_drive_failures={},
                       previous_redundant=set(), protected=set(), max_paths=8,
@@ -210,8 +210,8 @@ def _target(P, job):
 def test_a_push_whose_test_drive_touched_is_replanned_to_the_next_best_frontier():
     """Spec 3.4(iv): after a touch, the next-best frontier at once (same source), never the
     direction that failed, never through this cycle's other pushes or onto their targets."""
-    from coordinator.topology.params import TopologyParams
-    from coordinator.planner import JobSpec, plan_cycle, replan_push
+    from swarmcover.coordinator.topology.params import TopologyParams
+    from swarmcover.coordinator.planner import JobSpec, plan_cycle, replan_push
     spacing = 0.95
     snap, P = _lattice_snapshot(spacing)
     params = TopologyParams()

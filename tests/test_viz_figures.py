@@ -10,12 +10,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from PIL import Image
 
-from bus import messages as m
+from swarmcover.bus import messages as m
 from swarmcover.progress import Progress
-from viz.coverage import coverage_measure, disk_coverage
-from viz.figures import render_progress, render_snapshot, snapshot_image, write_gif
-from viz.geometry import build_scene
-from viz.synth import Scenario
+from swarmcover.viz.coverage import coverage_measure, disk_coverage
+from swarmcover.viz.figures import render_progress, render_snapshot, snapshot_image, write_gif
+from swarmcover.viz.geometry import build_scene
+from swarmcover.viz.synth import Scenario
 
 
 def _pixels(path) -> np.ndarray:
@@ -165,7 +165,7 @@ def test_progress_log_style_and_tty_style():
 
 
 def test_groundtruth_coverage_is_used_when_world_provides_it():
-    pytest.importorskip("world.groundtruth")
+    pytest.importorskip("swarmcover.world.groundtruth")
     fn, label = coverage_measure("auto")
     assert "ground truth" in label
     sc = Scenario()
@@ -192,7 +192,7 @@ def _drawn(fig):
 def test_no_label_title_or_legend_is_clipped_whatever_the_map_aspect(x0, y0, w, h):
     """Wide maps with wide tick labels (-12.5, 102.5: ROS maps have such origins) clipped
     the y label at 0.07 of the figure width; margins are now in inches."""
-    from viz.figures import snapshot_figure
+    from swarmcover.viz.figures import snapshot_figure
     truth = m.Truth(tick=1, t=0.0, ids=[0, 1], x=[0.5, 1.2], y=[0.5, 0.6], theta=[0.0, 0.0],
                     live=[False, True])
     truth.x[:], truth.y[:] = [x0 + 0.5, x0 + 1.2], [y0 + 0.5, y0 + 0.6]
@@ -213,7 +213,7 @@ def test_no_label_title_or_legend_is_clipped_whatever_the_map_aspect(x0, y0, w, 
 
 
 def test_overlapping_triangles_shade_like_one_triangle():
-    from viz.figures import TRI_FILL, snapshot_figure
+    from swarmcover.viz.figures import TRI_FILL, snapshot_figure
     # triangles ABC and ABE overlap inside ABE (E is inside ABC)
     truth = m.Truth(tick=1, t=0.0, ids=[0, 1, 2, 3], x=[0.0, 4.0, 2.0, 2.0],
                     y=[0.0, 0.0, 3.2, 1.6], theta=[0.0] * 4, live=[False] * 4)
@@ -235,7 +235,7 @@ def test_overlapping_triangles_shade_like_one_triangle():
 def test_removed_redundant_robots_and_inferred_edges_have_their_own_marks():
     from types import SimpleNamespace
 
-    from viz.figures import COLORS, snapshot_figure
+    from swarmcover.viz.figures import COLORS, snapshot_figure
     truth = m.Truth(tick=1, t=0.0, ids=[0, 1, 2, 7], x=[0.0, 2.0, 1.0, 3.5],
                     y=[0.0, 0.0, 1.6, 3.0], theta=[0.0] * 4, live=[False] * 4)
     base = m.Complex(cycle=4, vertices=[0, 1, 2], occupants=[0, 1, 2],
@@ -257,7 +257,7 @@ def test_removed_redundant_robots_and_inferred_edges_have_their_own_marks():
 
 
 def test_gif_frame_legend_text_is_readable_at_its_pixel_size():
-    from viz.figures import GIF_DPI, GIF_LEGEND_PT, GIF_WIDTH_IN, snapshot_figure
+    from swarmcover.viz.figures import GIF_DPI, GIF_LEGEND_PT, GIF_WIDTH_IN, snapshot_figure
     sc = Scenario()
     fig = snapshot_figure(sc.info, sc.truth(6, 0.5, 6, 6.0), sc.complex(6, 6.0),
                           width_in=GIF_WIDTH_IN, legend_fontsize=GIF_LEGEND_PT)

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from bus.keys import Keys
+from swarmcover.bus.keys import Keys
 from swarmcover.record import McapSink
 from swarmcover import plot
-from viz.synth import Scenario
+from swarmcover.viz.synth import Scenario
 
 
 def write_run(path, *, cycles=13, with_info=True, with_complex=True, ticks_per_cycle=4):
@@ -29,7 +29,7 @@ def write_run(path, *, cycles=13, with_info=True, with_complex=True, ticks_per_c
                 t = t_ns + tick * 50_000_000 + 1
                 sink.write(k.truth, sc.truth(c, j / ticks_per_cycle, tick, tick * 0.05).encode(), t)
                 for rid, (x, y) in sc.mocap(c, j / ticks_per_cycle, 0).items():
-                    from bus import messages as m
+                    from swarmcover.bus import messages as m
                     sink.write(k.odom(rid), m.Pose(robot=rid, x=x, y=y, source="mocap").encode(), t)
                 tick += 1
     return path

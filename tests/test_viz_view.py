@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from bus.keys import Keys
+from swarmcover.bus.keys import Keys
 from procs import client_session, free_port
-from viz.synth import Scenario
+from swarmcover.viz.synth import Scenario
 from swarmcover.view import LiveState, Snapshot, map_json, render_page
 
-SYNTH = [sys.executable, "-m", "viz.synth"]
+SYNTH = [sys.executable, "-m", "swarmcover.viz.synth"]
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CYCLES, KILL = 10, (7, 3)
 
@@ -318,7 +318,7 @@ def test_foxglove_websocket_client_receives_scene_updates(router, zargs, procs):
 
 
 def test_robots_removed_as_redundant_keep_their_own_mark_in_page_and_scene():
-    from bus import messages as m
+    from swarmcover.bus import messages as m
     from swarmcover.scene import SceneState
     truth = m.Truth(tick=1, t=0.0, ids=[0, 1, 2, 3], x=[0.0, 1.0, 0.5, 3.0],
                     y=[0.0, 0.0, 0.8, 3.0], theta=[0.0] * 4, live=[False] * 4)

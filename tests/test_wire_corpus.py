@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import wire_corpus
-from bus import messages as m
+from swarmcover.bus import messages as m
 
 
 def _with_added_fields(cls, saved: bytes) -> bytes:

@@ -5,8 +5,8 @@ from pathlib import Path
 
 import pytest
 
-from world.config import ConfigError, load_config, loads_config, to_toml
-from world.maps import build_map, map_from_path, read_ros_yaml
+from swarmcover.world.config import ConfigError, load_config, loads_config, to_toml
+from swarmcover.world.maps import build_map, map_from_path, read_ros_yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIGS = ROOT / "configs"
@@ -159,7 +159,7 @@ def test_polygons_must_be_simple(tmp_path):
 
 
 def test_map_size_is_bounded_with_the_limit_stated(tmp_path):
-    from world.maps import MAX_MAP_AREA_RV2, MAX_MAP_SIDE_RV
+    from swarmcover.world.maps import MAX_MAP_AREA_RV2, MAX_MAP_SIDE_RV
     huge = BASE.replace("[[0, 0], [4, 0], [4, 3], [0, 3]]",
                         "[[0, 0], [1e6, 0], [1e6, 1e6], [0, 1e6]]")
     with pytest.raises(ConfigError, match=f"limit of {MAX_MAP_SIDE_RV:g} rv") as ei:
@@ -192,11 +192,11 @@ def test_ros_map_size_is_bounded_before_pixels_are_read(tmp_path):
 def test_one_style_for_every_section():
     """[map]..[world], [agent], [coordinator] and [hwbridge] raise the same ConfigError with
     the same one-line message: file: [section] field = value: reason."""
-    from agents.params import ParamError, from_toml_text
-    from bus.configcheck import ConfigError as Common
-    from bus.configcheck import self_crossing
-    from coordinator.config import CoordinatorConfig
-    from hwbridge import config as hwconfig
+    from swarmcover.agents.params import ParamError, from_toml_text
+    from swarmcover.bus.configcheck import ConfigError as Common
+    from swarmcover.bus.configcheck import self_crossing
+    from swarmcover.coordinator.config import CoordinatorConfig
+    from swarmcover.hwbridge import config as hwconfig
     assert ConfigError is Common and hwconfig.ConfigError is Common
     assert issubclass(ParamError, Common)
     errs = []

@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from world.clock import LockstepGate, Pacer, RtfMeter
-from world.groundtruth import coverage_fraction, ideal_count, lattice, mean_edge_length
-from world.maps import WorldMap, map_from_path
+from swarmcover.world.clock import LockstepGate, Pacer, RtfMeter
+from swarmcover.world.groundtruth import coverage_fraction, ideal_count, lattice, mean_edge_length
+from swarmcover.world.maps import WorldMap, map_from_path
 
 
 def room(w, h, obstacles=()):

@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from PIL import Image
 
-from world.config import ConfigError, load_config
-from world.maps import (WorldMap, build_map, fill_ring, load_ros_map, points_in_polygon,
+from swarmcover.world.config import ConfigError, load_config
+from swarmcover.world.maps import (WorldMap, build_map, fill_ring, load_ros_map, points_in_polygon,
                         segments_intersect)
 
 FREE, OCC, UNK = 254, 0, 205
@@ -118,7 +118,7 @@ def test_config_points_at_a_ros_map_and_adds_obstacles(tmp_path):
 
 
 def test_shipped_office_map():
-    from world.maps import map_from_path
+    from swarmcover.world.maps import map_from_path
     cfg, wm = map_from_path("configs/office_ros.toml")
     assert len(wm.obstacles) == 2                 # pillar and desk; noise specks dropped
     assert not wm.contains([[2.6, 3.1], [7.2, 4.3], [5.05, 1.0], [8.0, 0.7]]).any()
@@ -149,8 +149,8 @@ def test_segments_intersect_basic():
 
 
 def test_map_from_world_info_round_trip():
-    from bus.messages import WorldInfo, decode
-    from world.maps import map_from_info, map_from_path
+    from swarmcover.bus.messages import WorldInfo, decode
+    from swarmcover.world.maps import map_from_info, map_from_path
     cfg, wm = map_from_path("configs/structured.toml")
     info = decode(WorldInfo(name=wm.name, rv=1.0, dt=0.05, **wm.info_fields()).validate().encode())
     wm2 = map_from_info(info)

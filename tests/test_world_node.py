@@ -11,12 +11,12 @@ import uuid
 import pytest
 import zenoh
 
-from bus.keys import Keys
-from bus.messages import (Clock, CmdVel, Pose, Remove, Sense, Spawn, Truth, TwinCmd, WorldInfo,
+from swarmcover.bus.keys import Keys
+from swarmcover.bus.messages import (Clock, CmdVel, Pose, Remove, Sense, Spawn, Truth, TwinCmd, WorldInfo,
                           decode)
-from bus.session import Mailbox, put
+from swarmcover.bus.session import Mailbox, put
 from procs import client_session
-from world.config import loads_config
+from swarmcover.world.config import loads_config
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -296,8 +296,8 @@ def test_lockstep_barrier_with_a_coordinator(procs, router, zargs, tmp_path):
     an acked spawn at the next boundary, gives the new body its first Sense (with the acked
     task's id) JOIN_TICKS later and waits for its agent there, then announces the agent and
     its status seq in the next Clock."""
-    from bus.messages import CoordAck
-    from world.node import join_ticks
+    from swarmcover.bus.messages import CoordAck
+    from swarmcover.world.node import join_ticks
     keys = Keys(swarm_of(zargs))
     s = client_session(router, keys.swarm)
     mail = Mailbox()

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from world.maps import map_from_path
-from world.physics import Physics
+from swarmcover.world.maps import map_from_path
+from swarmcover.world.physics import Physics
 
 R = 0.06
 

@@ -8,9 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from world.maps import WorldMap, map_from_path, segments_intersect
-from ground.angles import wrap_array as wrap
-from world.sensing import Sensors, sector_of, visible_pairs
+from swarmcover.world.maps import WorldMap, map_from_path, segments_intersect
+from swarmcover.ground.angles import wrap_array as wrap
+from swarmcover.world.sensing import Sensors, sector_of, visible_pairs
 
 R = 0.06
 

@@ -26,7 +26,7 @@ import msgpack
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from bus import messages as m  # noqa: E402
+from swarmcover.bus import messages as m  # noqa: E402
 
 PATH = ROOT / "tests" / "data" / "wire_corpus.msgpack.gz"
 VALID_PER_TYPE = 12

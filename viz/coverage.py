@@ -95,7 +95,7 @@ def _disks(info, truth) -> float | None:
 @lru_cache(maxsize=8)
 def _world_map(name: str, boundary: tuple, obstacles: tuple, sources: tuple):
     """world.maps.WorldMap of a WorldInfo (cached: it caches its rasters)."""
-    from world.maps import WorldMap
+    from swarmcover.world.maps import WorldMap
     return WorldMap(name=name, boundary=polygon_xy(boundary),
                     obstacles=[polygon_xy(o) for o in obstacles],
                     sources=np.asarray(sources, float).reshape(-1, 3))
@@ -104,8 +104,8 @@ def _world_map(name: str, boundary: tuple, obstacles: tuple, sources: tuple):
 def _groundtruth_fn() -> CoverageFn | None:
     """world.groundtruth.coverage_fraction(wm, positions, rv) adapted to (info, truth)."""
     try:
-        gt = importlib.import_module("world.groundtruth")
-        importlib.import_module("world.maps")
+        gt = importlib.import_module("swarmcover.world.groundtruth")
+        importlib.import_module("swarmcover.world.maps")
     except Exception:
         return None
     fn = getattr(gt, "coverage_fraction", None)

@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from bus import messages as m
+from swarmcover.bus import messages as m
 
 ROOM = (6.0, 4.0)
 OBSTACLE = [2.6, 1.4, 3.3, 1.4, 3.3, 2.5, 2.6, 2.5]
@@ -160,8 +160,8 @@ def _parse_kills(items: list[str]) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from bus.keys import Keys
-    from bus.session import (Shutdown, add_zenoh_args, keys_from_args, open_session, publisher,
+    from swarmcover.bus.keys import Keys
+    from swarmcover.bus.session import (Shutdown, add_zenoh_args, keys_from_args, open_session, publisher,
                              setup_logging)
 
     p = argparse.ArgumentParser(prog="python -m viz.synth", description=__doc__,
@@ -177,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--log-level", default="WARNING")
     add_zenoh_args(p)
     args = p.parse_args(argv)
-    setup_logging(args.log_level, "viz.synth")
+    setup_logging(args.log_level, "swarmcover.viz.synth")
     keys: Keys = keys_from_args(args)
     sc = Scenario(n_max=args.robots, kills=_parse_kills(args.kill))
     info_bytes = sc.info.encode()
@@ -190,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
             decl.append(qable)
             pub_truth = publisher(session, keys.truth, block=False)
             pub_clock = publisher(session, keys.clock, block=False)
-            from bus.trust import SignedPublisher  # with source_info, as the coordinator's
+            from swarmcover.bus.trust import SignedPublisher  # with source_info, as the coordinator's
             pub_cx = SignedPublisher(publisher(session, keys.complex, block=True), None)
             decl += [pub_truth, pub_clock, pub_cx]
             lv = session.liveliness()

@@ -23,9 +23,9 @@ from pathlib import Path
 from typing import Any
 
 # one style for every section (ConfigError is re-exported for the world's callers)
-from bus.configcheck import Checker, ConfigError
-from bus.messages import ROBOT_KINDS  # the wire's list, the one copy
-from ground.toml import dumps_toml  # noqa: F401  (re-exported: configref, tests)
+from swarmcover.bus.configcheck import Checker, ConfigError
+from swarmcover.bus.messages import ROBOT_KINDS  # the wire's list, the one copy
+from swarmcover.ground.toml import dumps_toml  # noqa: F401  (re-exported: configref, tests)
 
 MODES = ("lockstep", "realtime")
 WORLD_SECTIONS = ("map", "robots", "sensing", "world")

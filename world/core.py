@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from bus.messages import ROBOT_KINDS, Clock, CoordAck, Remove, Sense, Spawn
+from swarmcover.bus.messages import ROBOT_KINDS, Clock, CoordAck, Remove, Sense, Spawn
 
 from .config import RunConfig
 from .maps import WorldMap

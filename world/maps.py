@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ground.geometry import rings_to_segments
+from swarmcover.ground.geometry import rings_to_segments
 
 from .config import ConfigError, RunConfig, load_config
 

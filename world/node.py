@@ -49,10 +49,10 @@ from collections import Counter
 import numpy as np
 import zenoh
 
-from bus.keys import Keys
-from bus.messages import CmdVel, CoordAck, Pose, Remove, Spawn, Truth, TwinCmd, WorldInfo
-from bus.node import run_node
-from bus.session import Mailbox, Receiver, add_zenoh_args, publisher
+from swarmcover.bus.keys import Keys
+from swarmcover.bus.messages import CmdVel, CoordAck, Pose, Remove, Spawn, Truth, TwinCmd, WorldInfo
+from swarmcover.bus.node import run_node
+from swarmcover.bus.session import Mailbox, Receiver, add_zenoh_args, publisher
 
 from .clock import LockstepGate, Pacer, RtfMeter
 from .config import ConfigError, RunConfig, load_config, to_toml, with_sources

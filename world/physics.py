@@ -31,7 +31,7 @@ import pymunk
 import pymunk.batch as pb
 from scipy.spatial import cKDTree
 
-from bus.messages import ROBOT_KINDS
+from swarmcover.bus.messages import ROBOT_KINDS
 
 from .maps import WorldMap
 

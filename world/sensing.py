@@ -23,7 +23,7 @@ from itertools import chain
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ground.angles import wrap_array
+from swarmcover.ground.angles import wrap_array
 
 from .maps import SegmentGrid, WorldMap, segments_intersect
 

@@ -17,7 +17,7 @@ from typing import Mapping
 
 import numpy as np
 
-from ground.angles import circular_mean, wrap
+from swarmcover.ground.angles import circular_mean, wrap
 from .complex import Complex
 from .fence_local import _Local
 from .fence_sides import _PI3, Marks, Room, Sides

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 
-from ground.angles import wrap
+from swarmcover.ground.angles import wrap
 from .complex import Complex
 
 __all__: list[str] = []

@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ground.angles import wrap
+from swarmcover.ground.angles import wrap
 from .complex import Complex
 from .evidence import TILT_MATCH, needs_tilt, probe_depth_rv, probe_fractions
 from .fence_local import _Local

@@ -27,7 +27,7 @@ from typing import Mapping
 
 import numpy as np
 
-from ground.angles import wrap, wrap_array
+from swarmcover.ground.angles import wrap, wrap_array
 from .complex import Complex
 from .fence_local import _DEEP, _Local, _canon, _corner, _is_exception, _reflex, _sgn, _touch_ok
 from .params import TopologyParams

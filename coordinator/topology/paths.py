@@ -17,7 +17,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from ground.angles import wrap
+from swarmcover.ground.angles import wrap
 from .complex import Complex
 from .fence import Deployment, Fence
 from .params import TopologyParams

@@ -29,7 +29,7 @@ from scipy.sparse import coo_matrix, csr_matrix, identity
 from scipy.sparse.csgraph import breadth_first_order
 from scipy.sparse.linalg import splu, spsolve
 
-from ground.angles import wrap
+from swarmcover.ground.angles import wrap
 
 __all__ = ["align_headings", "estimate_shape", "Lattice", "lattice_target"]
 

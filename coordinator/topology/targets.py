@@ -10,7 +10,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
-from ground.angles import wrap
+from swarmcover.ground.angles import wrap
 
 __all__ = ["MoveTarget", "frontier_desired_bearings", "push_desired_bearings", "plan_push_targets",
            "probe_via_bearings"]
