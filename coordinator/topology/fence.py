@@ -104,6 +104,8 @@ def detect_fence(
     probe_clear=(),
     probe_offsets=None,
     tilt_failures=(),
+    sweeps=None,
+    sweep_tries=None,
 ) -> Fence:
     """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
 
@@ -188,10 +190,10 @@ def detect_fence(
     ends = test_drive_rule(cx, open_sides, room, ends)
     marks = corner_wait_marks(corner_wait, marks, room)
     ev = probe_evidence(probe_failures, probe_fracs, probe_unreachable, probe_clear,
-                        probe_offsets, tilt_failures)
+                        probe_offsets, tilt_failures, sweeps, sweep_tries)
     if P.corner_probes:
         marks, ends = corner_candidates(marks, ends, open_sides)
-    probing, marks = plan_probes(cx, L, P, room, ev, ends, marks)
+    probing, marks = plan_probes(cx, L, P, room, ev, ends, marks, open_sides)
     marks = forced_marks(cx, forced_obstacle, marks)
     fence_edges, K, O, z, deps = resolve_sides(cx, L, open_sides, marks, probing, room)
     deployments = robot_deployments(cx, L, room, deps, default_bearing)
