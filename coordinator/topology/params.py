@@ -53,7 +53,9 @@ class TopologyParams:
       rules before 2026-11-27).
     sweep_overlap: fraction of the edge by which the two ends' sweeps overlap (each goes
       this / 2 past the middle), so bearing noise in where a sweep stops leaves no gap.
-    sweep_margin: how far (rad) past the ray at its end a sweep goes.
+    sweep_margin: how far (rad) past the ray at its end a sweep goes: 10 deg, about 5 cm
+      at a wall 0.3 m out, twice the error of an agent's place from two landmarks seen
+      0.9 m away with 0.5 deg of bearing noise.
     sweep_tries: sweeps from one end of one side (a sweep stopped short, e.g. by a robot in
       its way, is tried again with a farther target, up to this many in all).
     """
@@ -72,7 +74,7 @@ class TopologyParams:
     tilt_min: float | None = None
     sweep: bool = True
     sweep_overlap: float = 0.1
-    sweep_margin: float = math.radians(5.0)
+    sweep_margin: float = math.radians(10.0)
     sweep_tries: int = 2
 
     def __post_init__(self) -> None:
