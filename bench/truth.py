@@ -15,7 +15,11 @@ along the deployment bearing; if its disk (radius r) touches a wall within wall_
 leaves it at the wall as a new robot (touch flag and contact bearing), a clear drive places
 a new robot at d0. A probe (kind "probe", when the fence offers it) first moves
 ``via_frac`` along its edge toward the other end, then drives ``depth_rv`` rv along its
-bearing, with the same outcomes (coordinator.topology.fence's Deployment docstring). Drive outcomes
+bearing, with the same outcomes (coordinator.topology.fence's Deployment docstring). A wall
+sweep (a probe with ``sweep_far``, the default rule for candidate sides) drives its bearing;
+a touch starts the sweep of bench/sweep.py (the agent's rule, on true positions), which
+comes home with the part of the edge it joined ("swept") or leaves a new robot where it
+went round a wall's end ("opening") or its wall receded ("room"). Drive outcomes
 go back to the fence through ``coordinator.topology.evidence`` when the project has it (else as
 ``test_drive_failures``). The loop runs until the fence has no deployment left, or a robot
 cap; with no frontier edge either that is a fixed point. The claim is then the deployer's

@@ -553,7 +553,7 @@ TASK_KINDS = ("hold", "goto", "deploy", "test_drive", "leave")
 def sweep_reason(hi: float, lo: float) -> str:
     """Status.reason of a wall sweep that found no opening: "swept HI LO", the fractions of
     the edge (from the robot's vertex towards the other end) between which its body slid
-    along the wall with no contact lost; LO "end" when it crossed the ray at its vertex
+    along the wall, going round no wall's end; LO "end" when it crossed the ray at its vertex
     (Task.sweep_stop). The task fails with it once the robot is back at its vertex (with
     " (return: why)" after it when it could not get back)."""
     low = "end" if lo == -math.inf else f"{lo:.3f}"
@@ -606,7 +606,7 @@ class Task(Message):
       its vertex until it crosses the ray from its vertex ``sweep_stop`` (rad) beyond the
       edge's perpendicular there; then it homes back to ``bearings`` and fails with reason
       "swept HI LO" (:func:`sweep_reason`). It stays where it is, done with reason
-      "opening", when it felt no wall for the agent's sweep_lost_m, and with "room" when
+      "opening", when it went round the end of a wall (agents.sweep), and with "room" when
       its wall recedes more than ``sweep_depth`` (m) from the edge; no touch at all is
       done as any test drive. ``sweep_edge``: direction (rad, reference frame) from the
       vertex to the other end; ``sweep_side``: +1 when the side swept is counter-clockwise

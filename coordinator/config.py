@@ -86,11 +86,12 @@ class CoordinatorConfig:
                                    # closes once both ends swept the wall in front of it: each
                                    # drives into its wall and slides along it, pressing into
                                    # it, past the edge's middle and back past its own end to
-                                   # the next side's perpendicular; a contact lost on the way
-                                   # is an opening the robot stays in (coordinator.topology.
-                                   # evidence). Every opening in that wall wider than the
-                                   # robot's body plus the agent's sweep margins is found,
-                                   # whatever its width in rv. false: door_min_rv's probes
+                                   # the next side's perpendicular; going round the end of a
+                                   # wall on the way is an opening the robot stays in
+                                   # (coordinator.topology.evidence). Every opening in that
+                                   # wall at least 2 x radius + 0.06 m wide is found (0.18 m
+                                   # with the default body and [agent] sweep_*), whatever its
+                                   # width in rv. false: door_min_rv's probe lines
     free_probes: bool = True       # frontier robots off every push probe their sides in the
                                    # same cycle without a path, and come back home whatever
                                    # they found (a clear one is no evidence; a push takes that

@@ -134,8 +134,9 @@ def test_a_returned_probe_is_never_offered_free_again_but_paths_still_may_take_i
     assert free_retry is None or free_retry.kind != "probe"
 
 
-def _deployer(snap):
-    dep = Deployer(CoordinatorConfig(sweep=False), sources=[90 * DEG])
+def _deployer(snap, cfg=CoordinatorConfig(sweep=False)):
+    """A deployer that holds ``snap``: every occupant a live robot holding its vertex."""
+    dep = Deployer(cfg, sources=[90 * DEG])
     dep.snapshot = snap
     seq = iter(range(1, 10_000))
     for v, rid in snap.occupant.items():

@@ -15,13 +15,12 @@ from bench import truth
 from swarmcover.bus.messages import Status, sweep_reason
 from swarmcover.coordinator import build_complex, detect_fence
 from swarmcover.coordinator.config import CoordinatorConfig
-from swarmcover.coordinator.deployer import Deployer
 from swarmcover.coordinator.jobs import make_job
 from swarmcover.coordinator.planner import Snapshot, plan_cycle
-from swarmcover.coordinator.roster import Robot
 from swarmcover.coordinator.actions import SendTask
 from swarmcover.coordinator.topology.evidence import Evidence, sweep_gaps, sweep_interval
 from swarmcover.coordinator.topology.params import TopologyParams
+from test_free_probes import _deployer as free_probe_deployer
 
 DEG = math.pi / 180
 INF = math.inf
@@ -184,16 +183,21 @@ def _sweep_spec(snap):
 
 
 def _deployer(snap):
-    dep = Deployer(CoordinatorConfig(), sources=[90 * DEG])
-    dep.snapshot = snap
-    seq = iter(range(1, 10_000))
-    for v, rid in snap.occupant.items():
-        dep.vertex_of[rid] = v
-        dep.robots[rid] = Robot(rid, alive=True, status=Status(
-            robot=rid, seq=next(seq), t=0.0, state="holding", vertex=v,
-            nbr_ids=[snap.occupant[u] for u in snap.nbrs[v]],
-            nbr_bearings=list(snap.nbrs[v].values())))
-    return dep, seq
+    return free_probe_deployer(snap, CoordinatorConfig())
+
+
+def _start(snap):
+    """The sweep of _sweep_spec(snap) started: (spec, deployer, status seq, job, its
+    test-drive task)."""
+    spec = _sweep_spec(snap)
+    dep, seq = _deployer(snap)
+    job = make_job(spec, snap.occupant)
+    dep.jobs = [job]
+    dep.out.actions = []
+    dep.pushes.advance(job, 1.0)
+    td = next(a.task for a in dep.out.actions if isinstance(a, SendTask)
+              and a.task.kind == "test_drive")
+    return spec, dep, seq, job, td
 
 
 def test_the_planner_and_the_task_builder_carry_a_sweep_to_the_agent():
@@ -211,13 +215,7 @@ def test_the_planner_and_the_task_builder_carry_a_sweep_to_the_agent():
     for v, (x, y) in spec.sweep_points.items():
         d = (DOOR[v] - DOOR[f]) / np.linalg.norm(DOOR[q] - DOOR[f])
         assert (x, y) == pytest.approx(tuple(d), abs=1e-9)
-    dep, _ = _deployer(snap)
-    job = make_job(spec, snap.occupant)
-    dep.jobs = [job]
-    dep.out.actions = []
-    dep.pushes.advance(job, 1.0)
-    td = next(a.task for a in dep.out.actions if isinstance(a, SendTask)
-              and a.task.kind == "test_drive")
+    _, dep, _, _, td = _start(snap)
     cfg = CoordinatorConfig()
     assert td.sweep_side == spec.sweep_side and td.sweep_far == pytest.approx(0.55)
     assert td.sweep_landmarks[0] == snap.occupant[q]               # the other end first
@@ -233,15 +231,7 @@ def test_the_planner_and_the_task_builder_carry_a_sweep_to_the_agent():
 
 
 def test_the_job_runner_books_what_a_sweep_joined():
-    snap = _snap()
-    spec = _sweep_spec(snap)
-    dep, seq = _deployer(snap)
-    job = make_job(spec, snap.occupant)
-    dep.jobs = [job]
-    dep.out.actions = []
-    dep.pushes.advance(job, 1.0)
-    td = next(a.task for a in dep.out.actions if isinstance(a, SendTask)
-              and a.task.kind == "test_drive")
+    spec, dep, seq, job, td = _start(_snap())
     f = spec.path[-1]
     dep.on_status(Status(robot=td.robot, seq=next(seq), t=2.0, state="holding", vertex=f,
                          task_id=td.task_id, task_state="failed",
@@ -256,15 +246,7 @@ def test_the_job_runner_books_what_a_sweep_joined():
 
 
 def test_a_sweep_that_could_not_get_home_is_booked_but_not_retried():
-    snap = _snap()
-    spec = _sweep_spec(snap)
-    dep, seq = _deployer(snap)
-    job = make_job(spec, snap.occupant)
-    dep.jobs = [job]
-    dep.out.actions = []
-    dep.pushes.advance(job, 1.0)
-    td = next(a.task for a in dep.out.actions if isinstance(a, SendTask)
-              and a.task.kind == "test_drive")
+    spec, dep, seq, job, td = _start(_snap())
     dep.on_status(Status(robot=td.robot, seq=next(seq), t=2.0, state="holding",
                          vertex=spec.path[-1], task_id=td.task_id, task_state="failed",
                          reason=sweep_reason(0.2, -INF) + " (return: lost landmarks)"))

@@ -110,7 +110,11 @@ def detect_fence(
     """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
 
     How a side closes (spec 3.4 with the amendment of 2026-11, "evidence before a side
-    closes"). The ends' rules only make a side a CANDIDATE:
+    closes"; with ``TopologyParams.sweep``, the default, a candidate side of an edge with a
+    triangle closes on WALL SWEEPS from both ends instead of the probes below: once the
+    intervals ``sweeps`` joined cover it, as coordinator.topology.evidence says, each end
+    offering a sweep until its tries are used up, then the inference 'sweep_gap' or, an end
+    having found room, 'probe_clear'). The ends' rules only make a side a CANDIDATE:
       * test-drive rule: both ends have no room on it -- each end's deployment into it lies
         within 30 deg of a failed drive of that robot, or within 90 deg of the wall contact
         it rests against; an end whose open wedge on that side is reflex (> 210 deg) also
@@ -172,6 +176,10 @@ def detect_fence(
       wall contact of either end that points into the open side. So every wall the side's
       robots have felt is probed along (within tau of) its normal, where an oblique door
       is widest (coordinator.topology.evidence).
+    sweeps: (u, v, sigma) -> intervals (lo, hi) of the side the wall sweeps of its ends
+      joined, in fractions from u, the ray at u -inf and the ray at v +inf
+      (evidence.sweep_interval).
+    sweep_tries: (u, v, sigma, 0.0 or 1.0: the end u or v) -> sweeps driven from that end.
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
       e.g. edges reclassified after a failed test drive in an earlier cycle.
     default_bearing: first deployment direction (rad, body frame) of a robot with no

@@ -48,9 +48,9 @@ class TopologyParams:
     sweep: a candidate side closes on WALL SWEEPS (coordinator.topology.evidence): each end
       drives into its wall, slides along it pressing into it to the line ``sweep_overlap``
       / 2 past the edge's middle, then back past its own end to the neighbouring side's
-      perpendicular (plus ``sweep_margin``, rad); a lost contact is an opening the robot
-      drives into. False: the perpendicular and tilted probes at door_min_rv spacing (the
-      rules before 2026-11-27).
+      perpendicular (plus ``sweep_margin``, rad); going round the end of a wall on the way is
+      an opening the robot stays in. False: the perpendicular and tilted probes at
+      door_min_rv spacing (the rules before 2026-11-27).
     sweep_overlap: fraction of the edge by which the two ends' sweeps overlap (each goes
       this / 2 past the middle), so bearing noise in where a sweep stops leaves no gap.
     sweep_margin: how far (rad) past the ray at its end a sweep goes: 10 deg, about 5 cm
