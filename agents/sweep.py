@@ -175,12 +175,10 @@ class Sweep(ModeState):
         lo = -math.inf if why == "end" else self.lo
         return Tick(outcome=Outcome.SWEPT, reason=sweep_reason(self.hi, lo))
 
-    def _next_phase(self) -> Tick | None:
-        if self.phase == 2:
-            return self._end()
+    def _phase_two(self) -> None:
+        """Back towards the vertex: the other hand, counts from zero."""
         self.phase, self.h = 2, -self.h
         self.lost = self.travelled = self.turned = 0.0
-        return None
 
     def tick(self, ctx: Context) -> Tick:
         p, see, g = ctx.p, ctx.see, self.geom
@@ -221,7 +219,7 @@ class Sweep(ModeState):
                 self.turned += 2.0 * p.tau
                 self.lost = 0.0
         if self.phase == 1 and f >= g.far:
-            self._next_phase()
+            self._phase_two()
         if self.phase == 2 and g.phi(R) >= g.stop and math.hypot(*R) > 1e-6:
             return self._end("end")
         if g.depth_of(R) > g.depth:
@@ -232,11 +230,12 @@ class Sweep(ModeState):
         body = wrap(d + psi)
         bumps = [c for c in see.bump if blocks(body, c, p.tau)]
         if self.travelled >= p.sweep_budget_rv * p.rv or bumps:
-            if self.phase == 1 and bumps and g.other in see.seen and any(
+            if self.phase == 2:
+                return self._end()
+            if bumps and g.other in see.seen and any(
                     abs(wrap(c - see.seen[g.other])) <= p.tau for c in bumps):
                 self.hi = max(self.hi, g.far)   # the other end's body: the wall goes on there
-            if self._next_phase() is not None:
-                return self._end()
+            self._phase_two()
             return Tick()
         if self.turned >= OPEN_TURN - 1e-9:
             return Tick(outcome=Outcome.DONE, reason="opening")
