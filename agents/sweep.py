@@ -31,6 +31,9 @@ back that add up to 135 deg since the last turn into a wall (the robot is going 
 end of a wall, into what lies behind it: a door, the back of a box) are an opening at
 least a body wide: a narrower gap stops the body on its far side, a turn into a wall. A
 jagged or bending wall, a niche or a box's corner turn it back as far as forward, or less.
+Into an opening the robot drives on along the normal of the wall whose end it went round
+(through a door: straight through the wall) until it is ``sweep_depth`` from the edge, or
+a touch blocks it, and stays there as a new robot (a clear probe).
 
 Phase 1 goes towards the edge's other end until it crosses the edge's perpendicular at
 ``sweep_far``; phase 2 back past the vertex until it crosses the ray ``sweep_stop`` beyond
@@ -145,6 +148,8 @@ class Sweep(ModeState):
         self.hi, self.lo = -math.inf, math.inf
         self.lost = 0.0                      # travel with no wall felt (m)
         self.turned = 0.0                    # turned round a wall's end (rad)
+        self.n0 = self.n                     # the normal of the wall it goes round (rad)
+        self.into: float | None = None       # an opening found: driving into it (rad)
         self.travelled = 0.0                 # travel in this phase (m)
         self.mark = see.advance
         self.v = (0.0, 0.0)                  # last command (reference frame, m/s)
@@ -180,6 +185,19 @@ class Sweep(ModeState):
         self.phase, self.h = 2, -self.h
         self.lost = self.travelled = self.turned = 0.0
 
+    def _drive_into(self, ctx: Context, psi: float) -> Tick:
+        """Into an opening along ``into``: done "opening" (the robot stays there) at
+        ``depth`` from the edge or after that far, or when a touch sector, a wall's or a
+        robot's, blocks the way."""
+        p, see, g = ctx.p, ctx.see, self.geom
+        body = wrap(self.into + psi)
+        if (g.depth_of(self.R) >= g.depth or self.travelled >= g.depth
+                or any(blocks(body, c, p.tau) for c in (*see.obst, *see.bump))):
+            return Tick(outcome=Outcome.DONE, reason="opening")
+        speed = p.test_drive_speed_frac * p.v_max
+        self.v = (speed * math.cos(self.into), speed * math.sin(self.into))
+        return Tick(speed * math.cos(body), speed * math.sin(body), intent=body)
+
     def tick(self, ctx: Context) -> Tick:
         p, see, g = ctx.p, ctx.see, self.geom
         psi = see.psi(self.frame)
@@ -195,7 +213,7 @@ class Sweep(ModeState):
             self.R = fix
         # dead reckoning, along a felt wall at the slowest progress it allows; then the fix
         vx, vy = self.v
-        if felt:
+        if felt and self.into is None:
             t = self.n - self.h * PI / 2.0
             k = math.hypot(vx, vy) * math.cos(p.press + p.tau) * math.cos(p.tau)
             vx, vy = k * math.cos(t), k * math.sin(t)
@@ -203,6 +221,8 @@ class Sweep(ModeState):
         if fix is not None:
             R = (R[0] + _BLEND * (fix[0] - R[0]), R[1] + _BLEND * (fix[1] - R[1]))
         self.R = R
+        if self.into is not None:
+            return self._drive_into(ctx, psi)
         f = g.frac(R)
         self.hi, self.lo = max(self.hi, f), min(self.lo, f)
         if felt:
@@ -215,6 +235,8 @@ class Sweep(ModeState):
             self.lost += step
             if self.lost >= p.sweep_lost_m:
                 # the wall ended or bent away: one sector back, round its end
+                if self.turned == 0.0:
+                    self.n0 = self.n
                 self.n = wrap(self.n + self.h * 2.0 * p.tau)
                 self.turned += 2.0 * p.tau
                 self.lost = 0.0
@@ -238,7 +260,9 @@ class Sweep(ModeState):
             self._phase_two()
             return Tick()
         if self.turned >= OPEN_TURN - 1e-9:
-            return Tick(outcome=Outcome.DONE, reason="opening")
+            # an opening: into it along the normal of the wall it went round
+            self.into, self.travelled = self.n0, 0.0
+            return self._drive_into(ctx, psi)
         speed = p.test_drive_speed_frac * p.v_max
         self.v = (speed * math.cos(d), speed * math.sin(d))
         return Tick(speed * math.cos(body), speed * math.sin(body), intent=body, slide=False)

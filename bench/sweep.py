@@ -16,8 +16,11 @@ of it has touched for LOST metres, the wall has ended or bent away: n turns 45 d
 towards where it was, so the robot goes round the wall's end. OPEN_TURNS such turns since
 the last turn into a wall (135 deg: the robot is going round the end of a wall, into what
 lies behind it - a door, the back of a box) are an opening at least a body wide (a
-narrower one stops the body on its far side, a turn into a wall), and the robot stays
-there as a new robot (its own deployments explore what lies beyond). A jagged or bending
+narrower one stops the body on its far side, a turn into a wall): the robot drives on into
+it along the normal of the wall whose end it went round (through a door: straight through
+the wall) until it is ``depth`` from the edge, a touch blocks it or a robot is in its way,
+and stays there as a new robot (a clear probe: its own deployments explore what lies
+beyond). A jagged or bending
 wall, a niche, a box's corner turn the robot back as often as forward, or less than 135.
 
 Phase 1 goes towards the edge's other end until the robot crosses the edge's perpendicular
@@ -161,6 +164,20 @@ class Sweeper:
         return "robot"
 
     # ------------------------------------------------------------------ the sweep
+    def _into(self, R, n: float):
+        """Drive from R along n (world, rad) into an opening: until ``depth`` from the edge
+        (at most that far), a touch sector blocking the way (within pi/2 - pi/N of it) or a
+        robot ahead. Returns (end point, metres)."""
+        u = _unit(n)
+        half = math.pi / 2.0 - self.w / 2.0
+        went = 0.0
+        while self.depth_of(R) < self.depth and went < self.depth:
+            if self.robot_ahead(R, u) or any(abs(_wrap(c - n)) < half for c in self.sectors(R)):
+                break
+            R = push_out(R + STEP * u, self.segs, self.r)
+            went += STEP
+        return R, went
+
     def run(self, R0, touch_dir: float, far: float, stop: float) -> SweepResult:
         """Sweep from R0, where the first drive touched a wall in world direction
         ``touch_dir`` (its touch sector's centre is the first normal)."""
@@ -199,7 +216,9 @@ class Sweeper:
                         break
                     return SweepResult("swept", R, hi, lo, False, total, " ".join(why))
                 if turned >= OPEN_TURNS:
-                    return SweepResult("room", R, hi, lo, True, total)   # an opening
+                    # an opening: into it along the normal of the wall it went round
+                    R, went = self._into(R, n0)
+                    return SweepResult("room", R, hi, lo, True, total + went)
                 R = push_out(R + STEP * d, self.segs, self.r)
                 travelled += STEP
                 total += STEP
@@ -214,6 +233,8 @@ class Sweeper:
                 else:
                     lost += STEP
                     if lost >= LOST - 1e-9:
+                        if turned == 0:
+                            n0 = n                 # the wall whose end it goes round
                         n = _wrap(n + h * self.w)  # the wall ended: round its end
                         turned, lost = turned + 1, 0.0
         return SweepResult("swept", R, hi, lo, False, total)  # pragma: no cover

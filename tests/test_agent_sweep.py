@@ -190,9 +190,9 @@ def test_a_sweep_slides_along_the_wall_and_reports_the_part_it_joined(ang):
 
 @pytest.mark.parametrize("door, ang", [(0.20, 0.0), (0.20, 22.5), (0.30, 10.0), (0.25, 40.0)])
 def test_a_door_a_body_wide_is_an_opening_the_robot_stays_in(door, ang):
-    """A door 0.20 m wide or more (a 0.12 m body): the sweep goes round its jamb and stays
-    there, done "opening", past the wall's front face: in the doorway or just behind the
-    jamb in the room beyond."""
+    """A door 0.20 m wide or more (a 0.12 m body): the sweep goes round its jamb, drives on
+    into it along the wall's normal and stays where that ends, done "opening": past the
+    wall's front face, in the doorway (a jamb blocked it) or in the room beyond."""
     wm, pts, rot = _scene(door, ang)
     beh, trace, _ = _run(wm, pts, _task(pts, rot))
     assert beh.task_state == "done" and beh.reason == "opening"
