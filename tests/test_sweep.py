@@ -255,20 +255,24 @@ def test_a_sweep_that_could_not_get_home_is_booked_but_not_retried():
 
 
 # ----------------------------------------------------------------------- the truth maps
-@pytest.mark.parametrize("seed, index, why", [
-    (0, 381, "a 0.30 rv door in front of a side, between its probe lines"),
-    (0, 70, "a 0.30 rv door straddling the shared end of two probed sides"),
-    (1, 449, "a 0.30 rv door at a side hugging its wall: the probes' approach legs failed"),
+@pytest.mark.parametrize("seed, index, why, probes_false", [
+    (0, 381, "a 0.30 rv door in front of a side, between its probe lines", True),
+    (0, 70, "a 0.30 rv door straddling the shared end of two probed sides", True),
+    (1, 449, "a 0.30 rv door at a side hugging its wall: the probes' approach legs failed",
+     True),
+    (1, 77, "a 0.32 rv door whose opening's robot, left in the doorway, had its sides "
+     "closed by the occlusion rule: it drives on into the room now", False),
 ])
-def test_rooms_behind_doors_a_robot_fits_through_are_found(seed, index, why):
-    """bench/truth.py maps the probe rule certified with the room behind a 0.30 rv door
-    uncovered (a 0.12 rv robot fits through): with wall sweeps (the default) the room is
-    found and covered; with the probe rule it is not (the test can fail)."""
+def test_rooms_behind_doors_a_robot_fits_through_are_found(seed, index, why, probes_false):
+    """bench/truth.py maps certified with the room behind a 0.30-0.32 rv door uncovered
+    (a 0.12 rv robot fits through): with wall sweeps (the default) the room is found and
+    covered; the first three the probe rule certified falsely (the test can fail)."""
     case = truth.make_map(seed, index)
-    assert case.kind == "two_rooms" and case.door_w < 0.31
+    assert case.kind == "two_rooms" and case.door_w < 0.33
     row = truth.run_map(case)
     assert row["end"] == "fixed" and row["certified"] and not row["false_certificate"], \
         (why, row["coverage"], row["hole_area"], row["hid_by"][:3])
     assert row["coverage"] > 0.99
-    old = truth.run_map(case, topology={"sweep": False})
-    assert old["false_certificate"], why
+    if probes_false:
+        old = truth.run_map(case, topology={"sweep": False})
+        assert old["false_certificate"], why
