@@ -107,10 +107,18 @@ class ModeState:
         reports their means); None when not holding still."""
         return None
 
+    def watching(self) -> bool:
+        """Whether this mode, left alone, only watches: it commands no motion and changes
+        nothing until what the robot senses changes (the agent is then idle)."""
+        return False
+
 
 class Idle(ModeState):
     """No task (or after ``leave``): stand still."""
     mode = Mode.IDLE
+
+    def watching(self) -> bool:
+        return True
 
 
 def push_window(window: dict[int, deque], seen: dict[int, float], size: int) -> None:
@@ -169,6 +177,9 @@ class Keep(ModeState):
 
     def still_window(self):
         return None if self.station else self.window
+
+    def watching(self) -> bool:
+        return not self.station
 
     def tick(self, ctx: Context) -> Tick:
         p, see = ctx.p, ctx.see
