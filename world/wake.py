@@ -49,6 +49,16 @@ def wake_params(rv: float, v_max: float, dt: float, sense_every: int, keepalive_
                 keepalive_ticks=max(1, round(keepalive_s / period)))
 
 
+def _members(ida: np.ndarray, ids) -> np.ndarray:
+    """Which of the sorted ids ``ida`` are in the set ``ids`` (a bool mask)."""
+    out = np.zeros(len(ida), bool)
+    if ids and len(ida):
+        q = np.fromiter(ids, np.int64, len(ids))
+        j = np.minimum(np.searchsorted(ida, q), len(ida) - 1)
+        out[j[ida[j] == q]] = True
+    return out
+
+
 class WakeRule:
     """Decides, per sensing tick, which robots get a Sense (see the module docstring).
 
@@ -90,10 +100,9 @@ class WakeRule:
             near = [i for h in hits for i in h]
             if near:
                 awake[np.asarray(near, np.int64)] = True
-        idle_ids = np.fromiter(idle, np.int64) if idle else np.zeros(0, np.int64)
-        awake |= ~np.isin(ida, idle_ids)
+        awake |= ~_members(ida, idle)
         if wake:
-            awake |= np.isin(ida, np.fromiter(wake, np.int64))
+            awake |= _members(ida, wake)
         awake |= (ida + k) % self.keepalive == 0
         return awake
 
