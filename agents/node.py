@@ -2,7 +2,8 @@
 
 Subscribes to its Sense (robot/N/sense), Task (robot/N/task) and body pose (robot/N/odom,
 telemetry only); publishes one CmdVel per Sense (same tick, at once: a lockstep world waits
-for it), its Status (every ``status_every`` Sense ticks and on every state/task change,
+for it; ``idle`` when the robot holds still with nothing to do, and a lockstep world then
+senses it only when something near it moves, world/wake.py), its Status (every ``status_every`` Sense ticks and on every state/task change,
 stamped with the tick, published before the tick's CmdVel, whose status_seq names it; once
 at start; and, except in lockstep, once a second while no Sense arrives) and the relay of
 its body pose (Pose, source "agent", on robot/N/pose).
