@@ -35,9 +35,12 @@ class Topic:
 
 TOPICS: tuple[Topic, ...] = (
     Topic("robot/{id}/sense", "Sense", "world", "agent {id}", "BLOCK",
-          "bearings of visible robots + touch sectors, one per tick"),
+          "bearings of visible robots + touch sectors, one per tick (lockstep: an idle robot "
+          "only while it or a robot near it moves, when asked, and every "
+          "`[sensing] idle_keepalive_s`: [docs/determinism.md](docs/determinism.md))"),
     Topic("robot/{id}/cmd_vel", "CmdVel", "agent {id}", "world (virtual) / hwbridge (live)",
-          "BLOCK", "body-frame velocity command answering a Sense tick"),
+          "BLOCK", "body-frame velocity command answering a Sense tick; `idle`: holding "
+          "still with nothing to do"),
     Topic("robot/{id}/odom", "Pose", "world / hwbridge", "agent {id}", "DROP",
           "pose as reported by the robot's body (telemetry, never used for control)"),
     Topic("robot/{id}/pose", "Pose", "agent {id}", "recorders, viewers", "DROP",
