@@ -1,0 +1,185 @@
+"""``swarmcover run``'s side of the hosts (issue 18.4): which hosts offer slots, on which
+one each agent starts, and stopping them all at the end. Thin: the rule is
+``swarmcover.hosts.pick_host``; the wire is ``swarmcover.hosts``.
+
+Called from run's main loop only (its Zenoh callbacks hand token and event samples to the
+loop's queue); each request is a Zenoh query answered in milliseconds, bounded by
+``timeout``.
+"""
+from __future__ import annotations
+
+import logging
+import statistics
+import time
+from collections import Counter
+
+from swarmcover.bus.keys import Keys
+from swarmcover.bus.messages import Spawn
+from swarmcover.hosts import (HostEvent, HostInfo, HostReply, HostStart, HostStop,
+                              HostWireError, decode, encode, pick_host, tally_line)
+
+LOCAL = "local"
+log = logging.getLogger("swarmcover.run")
+
+
+class HostPool:
+    """The hosts of a swarm as run sees them, and the agents run placed on them.
+
+    hosts: name -> its latest slots (HostInfo); where: robot -> host, for the agents run
+    started on a host and that have not exited; started: place ("local" or a host's name)
+    -> agents run started there; lost: host that went away -> the robots it had then."""
+
+    def __init__(self, session, keys: Keys, run_id: str, config_text: str,
+                 timeout: float = 5.0):
+        self.session, self.keys, self.run_id = session, keys, run_id
+        self.config = config_text
+        self.timeout = timeout
+        self.hosts: dict[str, HostInfo] = {}
+        self.where: dict[int, str] = {}
+        self.started: Counter = Counter()
+        self.lost: dict[str, list[int]] = {}
+        self.capacity: dict[str, int] = {}
+        self.start_s: dict[str, list[float]] = {}
+        self._full_said = False
+
+    # -- what the hosts say
+    def on_token(self, name: str, present: bool) -> None:
+        """A host's liveliness token came (ask its slots) or went (its agents went with it)."""
+        if present:
+            if name not in self.hosts:
+                info = self._ask(name, b"", HostInfo)
+                if info is not None:
+                    self._saw(info, fresh=True)
+                    log.info("host %s offers %d agent slots (%d free)", name, info.capacity,
+                             info.free)
+            return
+        info = self.hosts.pop(name, None)
+        if info is None:
+            return
+        robots = sorted(r for r, h in self.where.items() if h == name)
+        for r in robots:
+            del self.where[r]
+        self.lost[name] = robots
+        log.warning("host %s went away with %d of run's agents (robots %s): the coordinator "
+                    "refills their holes", name, len(robots), robots)
+
+    def on_event(self, payload: bytes) -> HostEvent | None:
+        try:
+            ev = decode(payload, HostEvent)
+        except HostWireError as e:
+            log.warning("dropping a host event: %s", e)
+            return None
+        if ev.info.name in self.hosts:
+            self._saw(ev.info)
+        if ev.what == "ready" and ev.start_s is not None:
+            self.start_s.setdefault(ev.info.name, []).append(ev.start_s)
+        elif ev.what in ("failed", "exited") and self.where.get(ev.robot) == ev.info.name:
+            del self.where[ev.robot]
+        return ev
+
+    def wait(self, n: int, timeout: float, stop) -> bool:
+        """Wait up to ``timeout`` s until ``n`` hosts announced themselves."""
+        end = time.monotonic() + timeout
+        while len(self.hosts) < n and time.monotonic() < end and not stop.is_set():
+            try:
+                replies = list(self.session.liveliness().get(self.keys.alive_hosts(),
+                                                             timeout=1.0))
+            except Exception as e:  # a closing session
+                log.debug("host query failed: %s", e)
+                replies = []
+            for r in replies:
+                if r.ok is not None:
+                    name = self.keys.host_name(str(r.ok.key_expr))
+                    if name:
+                        self.on_token(name, True)
+            stop.wait(0.3)
+        return len(self.hosts) >= n
+
+    # -- placing agents
+    def place(self, sp: Spawn, limits: tuple[float, float] | None) -> str | None:
+        """Start robot ``sp.robot``'s agent on the host with the most free slots (the next
+        one if it refuses or does not answer); the host's name, or None: start it locally."""
+        req = HostStart(run=self.run_id, robot=sp.robot, kind=sp.kind, live=sp.live,
+                        v_max=limits[0] if limits else None,
+                        w_max=limits[1] if limits else None, config=self.config)
+        tried: set[str] = set()
+        while (name := pick_host(self.hosts.values(), tried)) is not None:
+            tried.add(name)
+            reply = self._ask(name, encode(req), HostReply)
+            if reply is None:
+                continue
+            self._saw(reply.info)
+            if reply.ok:
+                self.where[sp.robot] = name
+                self.started[name] += 1
+                return name
+            log.warning("host %s refused robot %d: %s", name, sp.robot, reply.why)
+        if self.hosts and not self._full_said:
+            self._full_said = True
+            log.warning("no host has a free slot (%s): starting robot %d's agent on this "
+                        "machine, and any more that do not fit", self.tally(), sp.robot)
+        self.started[LOCAL] += 1
+        return None
+
+    def stop_all(self) -> None:
+        """Ask every host to stop this run's agents (each answers once they exited)."""
+        for name in list(self.hosts):
+            reply = self._ask(name, encode(HostStop(run=self.run_id)), HostReply,
+                              timeout=self.timeout + 10.0)
+            if reply is not None:
+                self._saw(reply.info)
+                if reply.robots:
+                    log.info("host %s stopped robots %s", name, list(reply.robots))
+        self.where.clear()
+
+    # -- what run reports
+    def running(self) -> int:
+        return len(self.where)
+
+    def tally(self, local: int | None = None) -> str:
+        """``local 2, A 5, B 4``: agents of this run running where, now."""
+        counts = Counter(self.where.values())
+        for name in self.hosts:
+            counts.setdefault(name, 0)
+        if local is not None:
+            counts[LOCAL] = local
+        return tally_line(counts)
+
+    def report(self) -> dict:
+        """summary.json's ``hosts``: per host, its capacity, the agents run started there,
+        the robots it had when it went away (null if it did not), and its agents' median
+        start time (request to READY, s)."""
+        out = {}
+        for name in sorted(set(self.capacity) | set(self.lost)):
+            s = self.start_s.get(name) or []
+            out[name] = dict(capacity=self.capacity.get(name), agents_started=self.started[name],
+                             lost_with=self.lost.get(name),
+                             agent_start_s_median=statistics.median(s) if s else None)
+        return out
+
+    # -- the wire
+    def _saw(self, info: HostInfo, fresh: bool = False) -> None:
+        old = self.hosts.get(info.name)
+        if fresh or old is None or info.seq >= old.seq:
+            self.hosts[info.name] = info
+            self.capacity[info.name] = info.capacity
+
+    def _ask(self, name: str, payload: bytes, typ, timeout: float | None = None):
+        """One query to host ``name``; its decoded answer, or None (logged)."""
+        try:
+            replies = self.session.get(self.keys.host(name), payload=payload or None,
+                                       timeout=timeout or self.timeout)
+            for r in replies:
+                if r.ok is not None:
+                    return decode(r.ok.payload.to_bytes(), typ)
+                log.warning("host %s answered with an error: %s", name,
+                            r.err.payload.to_bytes().decode(errors="replace"))
+                return None
+        except HostWireError as e:
+            log.warning("host %s: %s", name, e)
+            return None
+        except Exception as e:  # a closing session, a host that went away meanwhile
+            log.warning("host %s did not answer: %s", name, e)
+            return None
+        log.warning("host %s did not answer within %.0f s", name, timeout or self.timeout)
+        return None
