@@ -487,21 +487,23 @@ class RunState:
     recheck: dict | None = None
     limits: dict = dataclasses.field(default_factory=dict)   # robots_max and where from
     removed: set = dataclasses.field(default_factory=set)    # robots marked redundant so far
+    at_cx: Truth | None = None   # the world at the tick of last_cx (decided_truth)
 
     def saw_truth(self, truth: Truth | None) -> None:
         if truth is not None:
             self.last_truth = truth
             self.truths[truth.tick] = truth
             self.truths.pop(truth.tick - 400, None)
+            if self.last_cx is not None and abs(truth.t - self.last_cx.t) < 1e-6:
+                self.at_cx = truth
 
     def decided_truth(self) -> Truth | None:
         """The world at the tick of the last complex (lockstep: the same every run), not
-        wherever it had got to by the time the supervisor stopped; else the last one seen."""
-        if self.last_cx is not None:
-            at = [tr for tr in self.truths.values() if abs(tr.t - self.last_cx.t) < 1e-6]
-            if at:
-                return at[0]
-        return self.last_truth
+        wherever it had got to by the time the supervisor stopped; else the last one seen.
+        Kept aside when it arrives: a world left ticking while the run stops (nobody in its
+        roster any more) runs past the 400 ticks ``truths`` holds."""
+        return self.at_cx if self.last_cx is not None and self.at_cx is not None \
+            else self.last_truth
 
     def end(self, reason: str, detail: str = "", rc: int | None = None) -> bool:
         """Record why the run ends (the first reason wins)."""
@@ -518,6 +520,7 @@ class RunState:
         marks them while outside the complex), and the cycles so far (``on_cycle``)."""
         from swarmcover.viz.geometry import redundant_robots
         self.last_cx = cx
+        self.at_cx = next((tr for tr in self.truths.values() if abs(tr.t - cx.t) < 1e-6), None)
         self.removed |= redundant_robots(cx)
         return self.on_cycle(cx)
 
