@@ -352,7 +352,7 @@ def _serve(args, session, keys: Keys, stop) -> int:
     next_link = 0.0
     try:
         while not stop.is_set():
-            node.serve(0.05)
+            node.serve(0.01 if any(not a.ready for a in node.agents.values()) else 0.05)
             node.poll()
             now = time.monotonic()
             if now >= next_link:
