@@ -19,6 +19,7 @@ from swarmcover.hosts import (HostEvent, HostInfo, HostReply, HostStart, HostSto
                               HostWireError, decode, encode, pick_host, tally_line)
 
 LOCAL = "local"
+SILENT_S = 30.0     # a host that did not answer is not asked again for this long
 log = logging.getLogger("swarmcover.run")
 
 
@@ -40,19 +41,20 @@ class HostPool:
         self.lost: dict[str, list[int]] = {}
         self.capacity: dict[str, int] = {}
         self.start_s: dict[str, list[float]] = {}
+        self.silent: dict[str, float] = {}   # host -> until when it is not asked
+        self.tokens: set[str] = set()        # hosts whose token is present
         self._full_said = False
 
     # -- what the hosts say
     def on_token(self, name: str, present: bool) -> None:
         """A host's liveliness token came (ask its slots) or went (its agents went with it)."""
         if present:
+            self.tokens.add(name)
             if name not in self.hosts:
-                info = self._ask(name, b"", HostInfo)
-                if info is not None:
-                    self._saw(info, fresh=True)
-                    log.info("host %s offers %d agent slots (%d free)", name, info.capacity,
-                             info.free)
+                self.silent.pop(name, None)
+                self._meet(name)
             return
+        self.tokens.discard(name)
         info = self.hosts.pop(name, None)
         if info is None:
             return
@@ -63,6 +65,13 @@ class HostPool:
         log.warning("host %s went away with %d of run's agents (robots %s): the coordinator "
                     "refills their holes", name, len(robots), robots)
 
+    def _meet(self, name: str) -> None:
+        info = self._ask(name, b"", HostInfo)
+        if info is not None:
+            self._saw(info, fresh=True)
+            self._back(info)
+            log.info("host %s offers %d agent slots (%d free)", name, info.capacity, info.free)
+
     def on_event(self, payload: bytes) -> HostEvent | None:
         try:
             ev = decode(payload, HostEvent)
@@ -71,6 +80,7 @@ class HostPool:
             return None
         if ev.info.name in self.hosts:
             self._saw(ev.info)
+            self.silent.pop(ev.info.name, None)
         if ev.what == "ready" and ev.start_s is not None:
             self.start_s.setdefault(ev.info.name, []).append(ev.start_s)
         elif ev.what in ("failed", "exited") and self.where.get(ev.robot) == ev.info.name:
@@ -102,7 +112,10 @@ class HostPool:
         req = HostStart(run=self.run_id, robot=sp.robot, kind=sp.kind, live=sp.live,
                         v_max=limits[0] if limits else None,
                         w_max=limits[1] if limits else None, config=self.config)
-        tried: set[str] = set()
+        now = time.monotonic()
+        tried = {n for n, until in self.silent.items() if until > now}
+        for name in self.tokens - set(self.hosts) - tried:  # its first answer was missed
+            self._meet(name)
         while (name := pick_host(self.hosts.values(), tried)) is not None:
             tried.add(name)
             reply = self._ask(name, encode(req), HostReply)
@@ -157,6 +170,21 @@ class HostPool:
                              agent_start_s_median=statistics.median(s) if s else None)
         return out
 
+    def _back(self, info: HostInfo) -> None:
+        """A host that went away is back (its link to the run's router flapped: a router
+        restart): the robots it still runs are run's again, not lost."""
+        robots = self.lost.get(info.name)
+        if not robots:
+            return
+        kept = [r for r in robots if r in info.running]
+        for r in kept:
+            self.where[r] = info.name
+        self.lost[info.name] = [r for r in robots if r not in kept]
+        if not self.lost[info.name]:
+            del self.lost[info.name]
+        if kept:
+            log.info("host %s is back with robots %s", info.name, kept)
+
     # -- the wire
     def _saw(self, info: HostInfo, fresh: bool = False) -> None:
         old = self.hosts.get(info.name)
@@ -165,21 +193,21 @@ class HostPool:
             self.capacity[info.name] = info.capacity
 
     def _ask(self, name: str, payload: bytes, typ, timeout: float | None = None):
-        """One query to host ``name``; its decoded answer, or None (logged)."""
+        """One query to host ``name``; its decoded answer, or None (logged, and the host is
+        not asked again for SILENT_S: a hung host must not cost every spawn a timeout)."""
+        why = f"no answer within {timeout or self.timeout:.0f} s"
         try:
-            replies = self.session.get(self.keys.host(name), payload=payload or None,
-                                       timeout=timeout or self.timeout)
-            for r in replies:
+            for r in self.session.get(self.keys.host(name), payload=payload or None,
+                                      timeout=timeout or self.timeout):
                 if r.ok is not None:
                     return decode(r.ok.payload.to_bytes(), typ)
-                log.warning("host %s answered with an error: %s", name,
-                            r.err.payload.to_bytes().decode(errors="replace"))
-                return None
+                why = r.err.payload.to_bytes().decode(errors="replace")  # "Timeout", ...
+                break
         except HostWireError as e:
-            log.warning("host %s: %s", name, e)
-            return None
+            why = str(e)
         except Exception as e:  # a closing session, a host that went away meanwhile
-            log.warning("host %s did not answer: %s", name, e)
-            return None
-        log.warning("host %s did not answer within %.0f s", name, timeout or self.timeout)
+            why = str(e)
+        log.warning("host %s did not answer (%s): not asked again for %.0f s", name, why,
+                    SILENT_S)
+        self.silent[name] = time.monotonic() + SILENT_S
         return None

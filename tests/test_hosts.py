@@ -283,3 +283,68 @@ def test_host_whose_router_goes_away_stops_its_agents_and_exits(procs, tmp_path)
     assert "stopping robots [4] (the host is stopping)" in host.output()
     assert not pids_with(f"--parent-pid {host.pid} ")
     assert "robot 4 stopped" in (tmp_path / "pc3" / "agent-4.log").read_text()
+
+
+@pytest.mark.timeout(180)
+def test_runs_pool_spreads_skips_a_silent_host_and_keeps_the_robots_of_one_that_comes_back(
+        procs, tmp_path):
+    """run's side (swarmcover.hostpool) against two real hosts: the spreading order, a host
+    that does not answer (SIGSTOP) skipped and not asked again, local when no host has room,
+    and a router restart (every token vanishes and comes back) losing no robot."""
+    import threading
+
+    from swarmcover.bus.session import Mailbox
+    from swarmcover.hostpool import HostPool
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    router = procs.swarmcover("router", "--listen", ep)
+    router.wait_line("READY router", timeout=20)
+    swarm = "t" + uuid.uuid4().hex[:8]
+    h1 = _host(procs, ep, swarm, tmp_path, "h1", 2)
+    h2 = _host(procs, ep, swarm, tmp_path, "h2", 3)
+    s = client_session(ep, swarm)
+    k = Keys(swarm)
+    tokens = Mailbox()
+    sub = s.liveliness().declare_subscriber(k.alive_hosts(), tokens.callback, history=True)
+    pool = HostPool(s, k, "r1", TINY, timeout=2.0)
+    try:
+        assert pool.wait(2, 30, threading.Event())
+        place = lambda rid: pool.place(Spawn(robot=rid), None)  # noqa: E731
+        assert [place(r) for r in range(3)] == ["h2", "h2", "h1"]   # then h2, by capacity
+        import os
+        os.kill(h2.pid, signal.SIGSTOP)
+        try:
+            t0 = time.monotonic()
+            assert place(3) == "h1" and 2.0 <= time.monotonic() - t0 < 5.0  # h2 timed out
+            t0 = time.monotonic()
+            assert place(4) is None and time.monotonic() - t0 < 1.0  # h1 full, h2 not asked
+        finally:
+            os.kill(h2.pid, signal.SIGCONT)
+        assert pool.where == {0: "h2", 1: "h2", 2: "h1", 3: "h1"}
+        assert pool.silent.keys() == {"h2"}
+        assert dict(pool.started) == {"h2": 2, "h1": 2, "local": 1}
+        assert pool.tally(local=1) == "local 1, h1 2, h2 2"
+        # the run's router restarts: every host token goes and comes back
+        tokens.drain()
+        router.signal(signal.SIGKILL)
+        router.wait(10)
+        router = procs.swarmcover("router", "--listen", ep)
+        router.wait_line("READY router", timeout=20)
+        seen: list = []
+        end = time.monotonic() + 40
+        while time.monotonic() < end and not (
+                {("h1", False), ("h2", False)} <= set(seen)
+                and set(pool.hosts) == {"h1", "h2"}):
+            item = tokens.get(0.2)
+            if item is not None:
+                name, present = k.host_name(item[0]), str(item[2]).endswith("PUT")
+                seen.append((name, present))
+                pool.on_token(name, present)
+        assert {("h1", False), ("h2", False), ("h1", True), ("h2", True)} <= set(seen), seen
+        assert pool.where == {0: "h2", 1: "h2", 2: "h1", 3: "h1"} and pool.lost == {}
+        pool.stop_all()
+        assert pool.where == {} and not _agents_of(h1) and not _agents_of(h2)
+        rep = pool.report()
+        assert rep["h1"]["agents_started"] == 2 and rep["h2"]["lost_with"] is None
+    finally:
+        sub.undeclare()
+        s.close()
