@@ -27,8 +27,9 @@ class HostPool:
     """The hosts of a swarm as run sees them, and the agents run placed on them.
 
     hosts: name -> its latest slots (HostInfo); where: robot -> host, for the agents run
-    started on a host and that have not exited; started: place ("local" or a host's name)
-    -> agents run started there; lost: host that went away -> the robots it had then."""
+    started on a host and that have not exited (placed: every robot it started on one);
+    started: place ("local" or a host's name) -> agents run started there; lost: host that
+    went away -> the robots it had then."""
 
     def __init__(self, session, keys: Keys, run_id: str, config_text: str,
                  timeout: float = 5.0):
@@ -37,6 +38,7 @@ class HostPool:
         self.timeout = timeout
         self.hosts: dict[str, HostInfo] = {}
         self.where: dict[int, str] = {}
+        self.placed: set[int] = set()        # every robot run ever started on a host
         self.started: Counter = Counter()
         self.lost: dict[str, list[int]] = {}
         self.capacity: dict[str, int] = {}
@@ -124,6 +126,7 @@ class HostPool:
             self._saw(reply.info)
             if reply.ok:
                 self.where[sp.robot] = name
+                self.placed.add(sp.robot)
                 self.started[name] += 1
                 return name
             log.warning("host %s refused robot %d: %s", name, sp.robot, reply.why)

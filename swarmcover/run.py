@@ -897,7 +897,7 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                         continue
                     why = coord.check(key, payload, zid, att)
                     name = f"agent-{sp.robot}"
-                    if not why and (name in launcher.children or sp.robot in pool.where):
+                    if not why and (name in launcher.children or sp.robot in pool.placed):
                         why = f"robot {sp.robot} already has an agent"
                     if not why and _local_agents(launcher) + pool.running() >= spawn_cap:
                         why = f"{spawn_cap} agents running (robots_max {robots_max} + 8)"
