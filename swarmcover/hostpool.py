@@ -19,7 +19,8 @@ from swarmcover.hosts import (HostEvent, HostInfo, HostReply, HostStart, HostSto
                               HostWireError, decode, encode, pick_host, tally_line)
 
 LOCAL = "local"
-SILENT_S = 30.0     # a host that did not answer is not asked again for this long
+SILENT_S = 30.0     # a host that did not answer a start is not asked again for this long
+MEET_RETRY_S = 2.0  # a host whose token is there but whose slots are unknown: asked again
 log = logging.getLogger("swarmcover.run")
 
 
@@ -45,6 +46,7 @@ class HostPool:
         self.start_s: dict[str, list[float]] = {}
         self.silent: dict[str, float] = {}   # host -> until when it is not asked
         self.tokens: set[str] = set()        # hosts whose token is present
+        self.cancel: dict[str, set[int]] = {}  # host -> robots of starts it did not answer
         self._full_said = False
 
     # -- what the hosts say
@@ -54,7 +56,7 @@ class HostPool:
             self.tokens.add(name)
             if name not in self.hosts:
                 self.silent.pop(name, None)
-                self._meet(name)
+                self._meet(name, first=True)
             return
         self.tokens.discard(name)
         info = self.hosts.pop(name, None)
@@ -67,27 +69,42 @@ class HostPool:
         log.warning("host %s went away with %d of run's agents (robots %s): the coordinator "
                     "refills their holes", name, len(robots), robots)
 
-    def _meet(self, name: str) -> None:
-        info = self._ask(name, b"", HostInfo)
+    def _meet(self, name: str, first: bool = False) -> None:
+        """Ask a host whose token is there for its slots (the route to its queryable may
+        lag its token by a moment: asked again after MEET_RETRY_S, by refresh)."""
+        info = self._ask(name, b"", HostInfo, silent_s=MEET_RETRY_S, quiet=not first)
         if info is not None:
             self._saw(info, fresh=True)
             self._back(info)
+            self._cancel(name)
             log.info("host %s offers %d agent slots (%d free)", name, info.capacity, info.free)
 
-    def on_event(self, payload: bytes) -> HostEvent | None:
+    def refresh(self) -> None:
+        """Ask again the hosts whose token is present and whose slots are unknown."""
+        now = time.monotonic()
+        for name in sorted(self.tokens - set(self.hosts)):
+            if self.silent.get(name, 0.0) <= now:
+                self._meet(name)
+
+    def on_event(self, payload: bytes) -> tuple[HostEvent | None, bool]:
+        """A host's event, and whether it is about an agent run placed there (a start that
+        timed out may still have run late: that agent is not run's, and is stopped)."""
         try:
             ev = decode(payload, HostEvent)
         except HostWireError as e:
             log.warning("dropping a host event: %s", e)
-            return None
-        if ev.info.name in self.hosts:
+            return None, False
+        name = ev.info.name
+        ours = self.where.get(ev.robot) == name
+        if name in self.hosts:
             self._saw(ev.info)
-            self.silent.pop(ev.info.name, None)
+            self.silent.pop(name, None)
+            self._cancel(name)
         if ev.what == "ready" and ev.start_s is not None:
-            self.start_s.setdefault(ev.info.name, []).append(ev.start_s)
-        elif ev.what in ("failed", "exited") and self.where.get(ev.robot) == ev.info.name:
+            self.start_s.setdefault(name, []).append(ev.start_s)
+        elif ev.what in ("failed", "exited") and ours:
             del self.where[ev.robot]
-        return ev
+        return ev, ours
 
     def wait(self, n: int, timeout: float, stop) -> bool:
         """Wait up to ``timeout`` s until ``n`` hosts announced themselves."""
@@ -114,14 +131,14 @@ class HostPool:
         req = HostStart(run=self.run_id, robot=sp.robot, kind=sp.kind, live=sp.live,
                         v_max=limits[0] if limits else None,
                         w_max=limits[1] if limits else None, config=self.config)
+        self.refresh()
         now = time.monotonic()
         tried = {n for n, until in self.silent.items() if until > now}
-        for name in self.tokens - set(self.hosts) - tried:  # its first answer was missed
-            self._meet(name)
         while (name := pick_host(self.hosts.values(), tried)) is not None:
             tried.add(name)
             reply = self._ask(name, encode(req), HostReply)
-            if reply is None:
+            if reply is None:  # it may still start it, late: stopped when it is heard of
+                self.cancel.setdefault(name, set()).add(sp.robot)
                 continue
             self._saw(reply.info)
             if reply.ok:
@@ -173,6 +190,16 @@ class HostPool:
                              agent_start_s_median=statistics.median(s) if s else None)
         return out
 
+    def _cancel(self, name: str) -> None:
+        """Stop what the starts ``name`` did not answer may have started there since."""
+        for r in sorted(self.cancel.pop(name, ())):
+            if self.where.get(r) != name:
+                rep = self._ask(name, encode(HostStop(run=self.run_id, robot=r)), HostReply,
+                                silent_s=0.0, quiet=True)
+                if rep is not None and rep.ok:
+                    log.warning("host %s started robot %d late (its start had timed out and "
+                                "the robot went elsewhere): stopped it there", name, r)
+
     def _back(self, info: HostInfo) -> None:
         """A host that went away is back (its link to the run's router flapped: a router
         restart): the robots it still runs are run's again, not lost."""
@@ -195,9 +222,10 @@ class HostPool:
             self.hosts[info.name] = info
             self.capacity[info.name] = info.capacity
 
-    def _ask(self, name: str, payload: bytes, typ, timeout: float | None = None):
+    def _ask(self, name: str, payload: bytes, typ, timeout: float | None = None,
+             silent_s: float = SILENT_S, quiet: bool = False):
         """One query to host ``name``; its decoded answer, or None (logged, and the host is
-        not asked again for SILENT_S: a hung host must not cost every spawn a timeout)."""
+        not asked again for ``silent_s``: a hung host must not cost every spawn a timeout)."""
         why = f"no answer within {timeout or self.timeout:.0f} s"
         try:
             for r in self.session.get(self.keys.host(name), payload=payload or None,
@@ -210,7 +238,8 @@ class HostPool:
             why = str(e)
         except Exception as e:  # a closing session, a host that went away meanwhile
             why = str(e)
-        log.warning("host %s did not answer (%s): not asked again for %.0f s", name, why,
-                    SILENT_S)
-        self.silent[name] = time.monotonic() + SILENT_S
+        (log.debug if quiet else log.warning)(
+            "host %s did not answer (%s): not asked again for %.0f s", name, why, silent_s)
+        if silent_s > 0:
+            self.silent[name] = time.monotonic() + silent_s
         return None

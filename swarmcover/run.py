@@ -994,6 +994,7 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
             now = time.monotonic()
             if now - last_check >= 0.5:
                 last_check = now
+                pool.refresh()
                 _check_agents(launcher, unready, state)
                 if state.stop_reason:
                     break
@@ -1049,8 +1050,8 @@ def _host_sample(pool: HostPool, keys: Keys, key: str, payload: bytes, kind,
     if keys.relative(key).startswith("alive/"):
         pool.on_token(name, kind == zenoh.SampleKind.PUT)
         return
-    ev = pool.on_event(payload)
-    if ev is None or ev.run != pool.run_id or ev.what != "failed":
+    ev, ours = pool.on_event(payload)
+    if ev is None or not ours or ev.what != "failed":
         return
     state.end("agents_failed", f"agent-{ev.robot} on host {name} exited at start (exit "
               f"{ev.rc}): {ev.detail}; see its log on that host",

@@ -212,7 +212,7 @@ def test_host_starts_refuses_and_stops_agents_on_request(procs, router, tmp_path
         # tokens through the router-to-router link
         for rid in (5, 6):
             assert 0 < c.event(rid, "ready").start_s < 15
-            assert c.alive(rid)
+            assert wait_until(lambda: c.alive(rid), 10)  # noqa: B023
         assert len(_agents_of(host)) == 2
         assert (tmp_path / "pc1" / "agent-5.log").read_text().count("parameters from") == 1
         r = c.ask(HostStop(run="r1"))
@@ -288,9 +288,11 @@ def test_host_whose_router_goes_away_stops_its_agents_and_exits(procs, tmp_path)
 @pytest.mark.timeout(180)
 def test_runs_pool_spreads_skips_a_silent_host_and_keeps_the_robots_of_one_that_comes_back(
         procs, tmp_path):
-    """run's side (swarmcover.hostpool) against two real hosts: the spreading order, a host
-    that does not answer (SIGSTOP) skipped and not asked again, local when no host has room,
-    and a router restart (every token vanishes and comes back) losing no robot."""
+    """run's side (swarmcover.hostpool) against two real hosts: the spreading order; a host
+    that does not answer (SIGSTOP) skipped and not asked again, and the start it answers
+    late stopped there; local when no host has room; a router restart (every token
+    vanishes and comes back) losing no robot."""
+    import os
     import threading
 
     from swarmcover.bus.session import Mailbox
@@ -303,14 +305,29 @@ def test_runs_pool_spreads_skips_a_silent_host_and_keeps_the_robots_of_one_that_
     h2 = _host(procs, ep, swarm, tmp_path, "h2", 3)
     s = client_session(ep, swarm)
     k = Keys(swarm)
-    tokens = Mailbox()
-    sub = s.liveliness().declare_subscriber(k.alive_hosts(), tokens.callback, history=True)
+    inbox = Mailbox()     # what run's loop hands the pool: host tokens and host events
+    subs = [s.liveliness().declare_subscriber(k.alive_hosts(), inbox.callback, history=True),
+            s.declare_subscriber(k.host_events(), inbox.callback)]
     pool = HostPool(s, k, "r1", TINY, timeout=2.0)
+    seen: list = []
+
+    def loop_until(pred, timeout):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and not pred():
+            item = inbox.get(0.2)
+            if item is not None and k.relative(item[0]).startswith("alive/"):
+                name, present = k.host_name(item[0]), str(item[2]).endswith("PUT")
+                seen.append((name, present))
+                pool.on_token(name, present)
+            elif item is not None:
+                pool.on_event(item[1])
+            pool.refresh()
+        return pred()
+
     try:
         assert pool.wait(2, 30, threading.Event())
         place = lambda rid: pool.place(Spawn(robot=rid), None)  # noqa: E731
         assert [place(r) for r in range(3)] == ["h2", "h2", "h1"]   # then h2, by capacity
-        import os
         os.kill(h2.pid, signal.SIGSTOP)
         try:
             t0 = time.monotonic()
@@ -319,32 +336,26 @@ def test_runs_pool_spreads_skips_a_silent_host_and_keeps_the_robots_of_one_that_
             assert place(4) is None and time.monotonic() - t0 < 1.0  # h1 full, h2 not asked
         finally:
             os.kill(h2.pid, signal.SIGCONT)
-        assert pool.where == {0: "h2", 1: "h2", 2: "h1", 3: "h1"}
-        assert pool.silent.keys() == {"h2"}
+        assert pool.silent.keys() == {"h2"} and pool.cancel == {"h2": {3}}
         assert dict(pool.started) == {"h2": 2, "h1": 2, "local": 1}
+        # h2 runs the start it got while stopped; run hears of it and stops it there
+        assert loop_until(lambda: not pool.cancel and pool.hosts["h2"].running == (0, 1), 30)
+        assert pool.where == {0: "h2", 1: "h2", 2: "h1", 3: "h1"}
         assert pool.tally(local=1) == "local 1, h1 2, h2 2"
+        assert "stopping robots [3] (run r1 asked)" in h2.output()
         # the run's router restarts: every host token goes and comes back
-        tokens.drain()
         router.signal(signal.SIGKILL)
         router.wait(10)
         router = procs.swarmcover("router", "--listen", ep)
         router.wait_line("READY router", timeout=20)
-        seen: list = []
-        end = time.monotonic() + 40
-        while time.monotonic() < end and not (
-                {("h1", False), ("h2", False)} <= set(seen)
-                and set(pool.hosts) == {"h1", "h2"}):
-            item = tokens.get(0.2)
-            if item is not None:
-                name, present = k.host_name(item[0]), str(item[2]).endswith("PUT")
-                seen.append((name, present))
-                pool.on_token(name, present)
-        assert {("h1", False), ("h2", False), ("h1", True), ("h2", True)} <= set(seen), seen
+        assert loop_until(lambda: {("h1", False), ("h2", False)} <= set(seen)
+                          and set(pool.hosts) == {"h1", "h2"}, 40), (seen, pool.hosts)
         assert pool.where == {0: "h2", 1: "h2", 2: "h1", 3: "h1"} and pool.lost == {}
         pool.stop_all()
         assert pool.where == {} and not _agents_of(h1) and not _agents_of(h2)
         rep = pool.report()
         assert rep["h1"]["agents_started"] == 2 and rep["h2"]["lost_with"] is None
     finally:
-        sub.undeclare()
+        for sub in subs:
+            sub.undeclare()
         s.close()
