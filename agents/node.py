@@ -2,7 +2,8 @@
 
 Subscribes to its Sense (robot/N/sense), Task (robot/N/task) and body pose (robot/N/odom,
 telemetry only); publishes one CmdVel per Sense (same tick, at once: a lockstep world waits
-for it), its Status (every ``status_every`` Sense ticks and on every state/task change,
+for it; ``idle`` when the robot holds still with nothing to do, and a lockstep world then
+senses it only when something near it moves, world/wake.py), its Status (every ``status_every`` Sense ticks and on every state/task change,
 stamped with the tick, published before the tick's CmdVel, whose status_seq names it; once
 at start; and, except in lockstep, once a second while no Sense arrives) and the relay of
 its body pose (Pose, source "agent", on robot/N/pose).
@@ -41,6 +42,8 @@ from .params import ROBOT_KINDS, AgentParams, ParamError, from_toml_text, parse_
 HEARTBEAT_S = 1.0
 TASK_WAIT_S = 2.0    # wall seconds a Sense waits for the task it announces
 BODILESS_NOTICE_S = 30.0   # wall seconds between "no body yet" notices of an available agent
+IDLE_WAIT_S = 0.5    # wall seconds the loop sleeps with nothing to do (an idle robot in a
+                     # lockstep world gets a Sense only every few seconds: world/wake.py)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -271,7 +274,8 @@ class AgentNode:
             self._put_status(st)
         # after the tick's status: its seq tells a lockstep world (and so the coordinator)
         # which statuses this tick produced
-        out = CmdVel(robot=self.rid, tick=sense.tick, status_seq=self.core.seq)
+        out = CmdVel(robot=self.rid, tick=sense.tick, status_seq=self.core.seq,
+                     idle=self.core.idle)
         if cmd is not None:
             out.vx, out.vy, out.wz = cmd.vx, cmd.vy, cmd.wz
         self.last_cmd = out.encode()
@@ -326,7 +330,7 @@ def _serve(args, session, keys, stop) -> int:
         parent = args.parent_pid
         mb = node.mailbox
         while not stop.is_set():
-            item = mb.get(timeout=0.2 if node.held is None else 0.02)
+            item = mb.get(timeout=IDLE_WAIT_S if node.held is None else 0.02)
             if item is not None or node.held is not None:
                 node.handle(([item] if item is not None else []) + mb.drain())
             if parent is not None and os.getppid() != parent:

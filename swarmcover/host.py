@@ -214,7 +214,7 @@ class HostNode:
         f = open(path, "ab", buffering=0)
         try:
             self.sup.start(req.robot, agent_flags(req.kind, conf, req.live, limits),
-                           stdout=f, stderr=subprocess.STDOUT)
+                           stdout=f, stderr=subprocess.STDOUT, watch_ready=True)
         except OSError:
             f.close()
             raise
@@ -252,9 +252,10 @@ class HostNode:
                 self._finish(rid, None)
 
     def poll(self) -> None:
-        """Report agents that became ready or exited."""
+        """Report agents that became ready (their readiness pipe, bus.node.ready) or exited."""
+        starting, running = set(self.sup.starting()), self.sup.running()
         for a in list(self.agents.values()):
-            if not a.ready and _has_ready(a.log_path):
+            if not a.ready and a.robot not in starting and a.robot in running:
                 a.ready = True
                 dt = time.monotonic() - a.t0
                 log.info("robot %d: agent ready %.2f s after the request", a.robot, dt)
@@ -268,7 +269,7 @@ class HostNode:
             return
         a.file.close()
         self.book.remove(rid)
-        if not a.ready and not _has_ready(a.log_path) and rc is not None and rc > 0:
+        if rc is not None and rc > 0 and not _has_ready(a.log_path):  # the log decides
             detail = _first_error(a.log_path)
             log.warning("robot %d: agent exited at start (exit %d): %s", rid, rc, detail)
             self._event(a, "failed", rc=rc, detail=detail)

@@ -821,7 +821,7 @@ def _first_error(path: Path) -> str:
 def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Keys, out: Path,
                stop: Shutdown, state: RunState, t_wall0: float, live_limits: dict) -> None:
     from swarmcover.bus.session import query_world_info
-    from swarmcover.progress import Progress
+    from swarmcover.ground.progress import Progress
     from swarmcover.recheck import recheck
     from swarmcover.world.groundtruth import coverage_fraction
     rx = Receiver(log)
@@ -853,7 +853,7 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
     try:
         state.info = query_world_info(session, keys, 5.0, logger=log)
         if args.record:
-            from swarmcover.record import Recorder
+            from swarmcover.recording.record import Recorder
             recorder = Recorder(session, keys.all, str(out / "run.mcap"))
             recorder.start()
         hw = cfg.section("hwbridge")
