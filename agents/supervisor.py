@@ -130,11 +130,16 @@ class Supervisor:
 
     def stop(self, rid: int, timeout: float = 5.0, sig: int = signal.SIGTERM) -> int | None:
         """Stop one agent (signal, then SIGKILL after ``timeout`` s); returns its code."""
-        c = self.children.pop(rid, None)
-        if c is None:
-            return None
-        c.close_ready()
-        return _stop([c], timeout, sig)[rid]
+        return self.stop_many([rid], timeout, sig).get(rid)
+
+    def stop_many(self, rids, timeout: float = 5.0,
+                  sig: int = signal.SIGTERM) -> dict[int, int]:
+        """Stop these agents at once (``sig`` to all, SIGKILL those still up after
+        ``timeout`` s in total); robot id -> return code of those that were running."""
+        children = [c for c in (self.children.pop(r, None) for r in rids) if c is not None]
+        for c in children:
+            c.close_ready()
+        return _stop(children, timeout, sig)
 
     def stop_all(self, timeout: float = 5.0, sig: int = signal.SIGTERM) -> dict[int, int]:
         """Stop every agent: ``sig`` to all, wait up to ``timeout`` s in total, SIGKILL the

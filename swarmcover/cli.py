@@ -16,6 +16,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "coordinator": ("swarmcover.coordinator.node", "builds the complex, certifies coverage, plans pushes"),
     "agent": ("swarmcover.agents.node", "one robot: bearing-only controller and behaviours"),
     "spawn": ("swarmcover.agents.spawn", "start N agent processes and supervise them"),
+    "host": ("swarmcover.host", "offer this machine to runs: its own router, agents started on request"),
     "hwbridge": ("swarmcover.hwbridge.node", "mix live robots in: mocap -> twin sync, safe command output"),
     "fake-robot": ("swarmcover.hwbridge.fake_robot", "stand-in live robot (differential drive + mocap)"),
     "topics": ("swarmcover.topics", "inspect the swarm's Zenoh topics: list, echo, hz, alive"),
