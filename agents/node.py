@@ -52,6 +52,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--id", type=int, required=True, help="robot id (>= 0)")
     p.add_argument("--kind", choices=ROBOT_KINDS, default=None,
                    help="override [robots].kind of the run config")
+    p.add_argument("--reserve", action="store_true",
+                   help="started ahead of its robot by `swarmcover run` (its reserve): waits "
+                        "for a body without offering itself as available")
     p.add_argument("--live", action="store_true",
                    help="this agent drives a live robot (reported in Status)")
     p.add_argument("--v-max", type=float, default=None, help="override [robots].v_max (m/s)")
@@ -120,10 +123,11 @@ class AgentNode:
     """The process loop around an :class:`agents.core.AgentCore`: decode, step, publish."""
 
     def __init__(self, session, keys: Keys, rid: int, params: AgentParams, live: bool,
-                 log: logging.Logger, lockstep: bool = False):
+                 log: logging.Logger, lockstep: bool = False, reserve: bool = False):
         self.session, self.keys, self.rid, self.p, self.live, self.log = (
             session, keys, rid, params, live, log)
         self.lockstep = lockstep
+        self.reserve = reserve   # run's reserve: its robot's id is run's to give, not ours
         self.core = AgentCore(params, rid, live=live, log=log)
         self.beh = self.core.beh
         self.rx = Receiver(log)
@@ -154,7 +158,8 @@ class AgentNode:
         s, k = self.session, self.keys
         # available (no body yet) before alive: a coordinator that sees both in order never
         # takes a waiting agent for a robot of its swarm; dropped with the first Sense
-        self.avail_token = s.liveliness().declare_token(k.avail(self.rid))
+        if not self.reserve:
+            self.avail_token = s.liveliness().declare_token(k.avail(self.rid))
         self.token = s.liveliness().declare_token(k.alive("robot", self.rid))
         self.pub_cmd = publisher(s, k.cmd_vel(self.rid), block=True, express=True)
         self.pub_status = publisher(s, k.status(self.rid), block=True)
@@ -321,7 +326,8 @@ def _serve(args, session, keys, stop) -> int:
                       args.id, keys.prefix, keys.alive("robot", args.id))
             return 2
         lockstep = world_mode(args, session, keys, stop, log) == "lockstep"
-        node = AgentNode(session, keys, args.id, params, args.live, log, lockstep=lockstep)
+        node = AgentNode(session, keys, args.id, params, args.live, log, lockstep=lockstep,
+                         reserve=args.reserve)
         node.open()
         node.publish_status()
         ready(f"agent {args.id} kind={params.kind}")
@@ -344,7 +350,8 @@ def _serve(args, session, keys, stop) -> int:
                 log.warning("robot %d has no body yet: available, waiting for the "
                             "coordinator to place it (is a run going in swarm %s?)",
                             args.id, keys.prefix)
-        node.stop_robot()
+        if node.live or node.core.ticks:   # a virtual robot never sensed has no body to stop
+            node.stop_robot()
         log.info("robot %d stopped: %d ticks, %d skipped or repeated, %d invalid messages, "
                  "%d behaviour errors, %d ticks without an announced task", args.id,
                  node.core.ticks, node.skipped, node.rx.invalid_total, node.core.errors,

@@ -46,6 +46,8 @@ from swarmcover.bus.session import (Receiver, Shutdown, add_zenoh_args, make_con
                          setup_logging, zenoh_argv)
 from swarmcover.bus.trust import KEY_ENV, new_key, sample_origin, verify
 from swarmcover.hostpool import HostPool
+from swarmcover.hosts import agent_flags
+from swarmcover.reserve import AgentReserve
 
 log = logging.getLogger("swarmcover.run")
 MAX_COORDINATOR_RESTARTS = 3
@@ -383,6 +385,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--port", type=int, default=None,
                    help="port of the embedded router on 127.0.0.1 (default 7447, or a free one "
                         "if taken); --listen gives whole endpoints")
+    p.add_argument("--reserve", type=int, default=4, metavar="N",
+                   help="lockstep: keep N agent processes started ahead of the coordinator's "
+                        "next robots, so a new body never waits for its process to start "
+                        "(swarmcover/reserve.py; 0: none; not with hosts)")
     p.add_argument("--hosts", type=int, default=0, metavar="N",
                    help="wait (up to 60 s) for N hosts (`swarmcover host`) to announce "
                         "themselves before the first robot; agents go to the hosts by free "
@@ -843,6 +849,28 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
     available: set[int] = set()     # agents up without a body (joined by hand, any host)
     robots_max = int(state.limits.get("robots_max") or 400)
     spawn_cap = robots_max + 8      # live agent processes; a few more for races and refills
+    reserve = AgentReserve(args.reserve if cfg.world.mode == "lockstep" else 0)
+
+    def top_up() -> None:
+        """Start the reserve's agents for the next ids, stop those passed over (from the
+        first Spawn on: agents that joined by hand before the run have announced themselves
+        by then, and their ids are not run's to take)."""
+        reserve.started = True
+        if pool.hosts:
+            reserve.size = 0      # agents go to the hosts
+        start, stop_ids = reserve.plan()
+        for rid in stop_ids:
+            c = launcher.children.get(f"agent-{rid}")
+            if c is not None:
+                c.signal(signal.SIGTERM)
+            unready.pop(f"agent-{rid}", None)
+        for rid in start:
+            name = f"agent-{rid}"
+            if name in launcher.children and launcher.children[name].alive():
+                continue
+            launcher.start(name, ["agent", "--id", str(rid), "--reserve",
+                                  *agent_flags(cfg.robots.kind, conf_path, False, None)])
+            unready[name] = 0.0
     stall = StallWatch(robots_max)
     unready: dict[str, float] = {}  # agent child name -> when we last looked for READY
     recorder = None
@@ -889,6 +917,9 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                     rid = keys.robot_id(key)
                     if rid is not None and kind == zenoh.SampleKind.PUT:
                         available.add(rid)
+                        reserve.saw((rid,))
+                        if reserve.started:
+                            top_up()
                     elif rid is not None:
                         available.discard(rid)
                 elif rel == "world/spawn":
@@ -897,9 +928,25 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                         continue
                     why = coord.check(key, payload, zid, att)
                     name = f"agent-{sp.robot}"
+                    reserved = not why and reserve.take(sp.robot)
+                    if reserved and (sp.live or sp.kind != cfg.robots.kind
+                                     or not launcher.children[name].alive()):
+                        launcher.children[name].signal(signal.SIGTERM)   # not this one
+                        launcher.children[name].p.wait(10)
+                        launcher.children.pop(name).close()
+                        unready.pop(name, None)
+                        reserved = False
+                    if reserved:
+                        state.spawned += 1     # its agent runs already (the reserve)
+                        top_up()
+                        continue
+                    if not why and name in launcher.children \
+                            and not launcher.children[name].alive() and sp.robot in reserve.passed:
+                        launcher.children.pop(name).close()    # a reserve passed over, stopped
                     if not why and (name in launcher.children or sp.robot in pool.placed):
                         why = f"robot {sp.robot} already has an agent"
-                    if not why and _local_agents(launcher) + pool.running() >= spawn_cap:
+                    if not why and (_local_agents(launcher) - len(reserve.ids) + pool.running()
+                                    >= spawn_cap):
                         why = f"{spawn_cap} agents running (robots_max {robots_max} + 8)"
                     if why:
                         state.refuse("spawn", why)
@@ -916,6 +963,7 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                         state.joined += 1
                         continue
                     state.spawned += 1
+                    top_up()
                     if pool.place(sp, live_limits.get(sp.robot)) is not None:
                         continue
                     launcher.start(name, _agent_args(sp, conf_path, live_limits))
