@@ -112,6 +112,16 @@ class Behaviour:
         return self._mode.mode
 
     @property
+    def idle(self) -> bool:
+        """Whether the robot holds still with nothing to do until what it senses changes:
+        no task waiting or running, no motion commanded, and a mode that only watches (no
+        task, or keeping a finished snapshot without station keeping). A lockstep world may
+        then stop sending it every Sense (world.wake); a task, a touch, a push or motion
+        nearby brings them back."""
+        return (self.pending is None and self.task_state is not TaskState.RUNNING
+                and self.cmd is STOP and self._mode.watching())
+
+    @property
     def contact(self) -> bool:
         """Whether an obstacle contact is reported."""
         return self.touch.active

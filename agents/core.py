@@ -2,9 +2,12 @@
 the in-process loop (swarmcover/simloop.py) both run, so the two cannot drift apart.
 
 :class:`AgentCore` owns the :class:`agents.behaviours.Behaviour`, numbers the Status
-messages (``seq``), publishes one every ``status_every`` of its own Sense ticks and on every
-state, task-state or contact change, and stops the robot (no command) when the behaviour
-raises, logging the first error. No I/O, no clock: ``Sense.t`` is the only time.
+messages (``seq``), publishes one every ``status_every`` of its own Sense ticks, on every
+state, task-state or contact change and when the Sense asks for one (``Sense.report``), and
+stops the robot (no command) when the behaviour raises, logging the first error. After each
+step, :attr:`AgentCore.idle` says whether the robot holds still with nothing to do (the
+command's ``idle`` flag: a lockstep world may then sense it less often). No I/O, no clock:
+``Sense.t`` is the only time.
 """
 from __future__ import annotations
 
@@ -32,6 +35,7 @@ class AgentCore:
         self.ticks = 0        # Sense ticks stepped
         self.errors = 0       # behaviour errors (the robot stopped on each)
         self.last_t = 0.0     # Sense.t of the last tick stepped (s)
+        self.idle = False     # after the last step: holding still with nothing to do
 
     def status(self, tick: int = -1, pose: list | None = None) -> Status:
         """The next Status (its seq counts up), for tick ``tick`` (-1: outside a tick,
@@ -53,7 +57,8 @@ class AgentCore:
             cmd = None
         self.ticks += 1
         self.last_t = sense.t
+        self.idle = cmd is not None and self.beh.idle
         st = None
-        if self.beh.changed or self.ticks % self.every == 0:
+        if self.beh.changed or self.ticks % self.every == 0 or sense.report:
             st = self.status(sense.tick, pose)
         return cmd, st

@@ -113,10 +113,18 @@ class ModeState:
         reports their means); None when not holding still."""
         return None
 
+    def watching(self) -> bool:
+        """Whether this mode, left alone, only watches: it commands no motion and changes
+        nothing until what the robot senses changes (the agent is then idle)."""
+        return False
+
 
 class Idle(ModeState):
     """No task (or after ``leave``): stand still."""
     mode = Mode.IDLE
+
+    def watching(self) -> bool:
+        return True
 
 
 def push_window(window: dict[int, deque], seen: dict[int, float], size: int) -> None:
@@ -176,6 +184,9 @@ class Keep(ModeState):
     def still_window(self):
         return None if self.station else self.window
 
+    def watching(self) -> bool:
+        return not self.station
+
     def tick(self, ctx: Context) -> Tick:
         p, see = ctx.p, ctx.see
         psi = see.psi(self.frame)
@@ -192,29 +203,32 @@ class Keep(ModeState):
                 if m is not None:
                     means[l] = m
         errs = bearing_errors(means, target, psi)
-        valid = {l: e for l, e in errs.items() if abs(e) <= p.gate}
-        mags = sorted((abs(e) for e in valid.values()), reverse=True)
         # A bump moves every bearing except those along the bump, so at least two landmarks
         # show an error; a landmark that moved itself leaves the others unchanged. Only a
         # felt bump (another robot touched us lately) counts: a holding robot is the
         # swarm's static reference and must never chase neighbours that move on purpose.
-        bumped = p.hold_rehome and see.t - see.bumped_t <= p.lost_timeout_s
-        if bumped and len(mags) >= 2 and mags[0] > p.deadband and mags[1] > p.second:
-            self.station = True
-            self.stop = StopRule(p.arrive, p.arrive_ticks, p.error_alpha)
-            ux, uy = homing_velocity({l: see.seen[l] for l in valid}, target, p.v_max, p.g0, psi)
-            return Tick(ux, uy)
-        # still: adopt new neighbours and re-record moved ones once they are steady
+        if p.hold_rehome and see.t - see.bumped_t <= p.lost_timeout_s:
+            valid = {l: e for l, e in errs.items() if abs(e) <= p.gate}
+            mags = sorted((abs(e) for e in valid.values()), reverse=True)
+            if len(mags) >= 2 and mags[0] > p.deadband and mags[1] > p.second:
+                self.station = True
+                self.stop = StopRule(p.arrive, p.arrive_ticks, p.error_alpha)
+                ux, uy = homing_velocity({l: see.seen[l] for l in valid}, target, p.v_max,
+                                         p.g0, psi)
+                return Tick(ux, uy)
+        # still: adopt new neighbours and re-record moved ones once they are steady (a
+        # landmark within the deadband of its target needs neither: checked first, cheaply)
         half = p.deadband / 2
         for l, m in means.items():
+            e = errs.get(l)
+            if e is not None and abs(e) <= p.deadband:
+                continue
             w = self.window[l]
             if len(w) < p.hold_window or any(abs(wrap(x - m)) > half for x in w):
                 continue
-            e = errs.get(l)
-            if e is None or abs(e) > p.deadband:
-                target[l] = wrap(m - psi)
-                if self.frame is not None and l in see.back:
-                    self.frame.adopt(l, see.seen[l], see.back[l], psi)
+            target[l] = wrap(m - psi)
+            if self.frame is not None and l in see.back:
+                self.frame.adopt(l, see.seen[l], see.back[l], psi)
         horizon = see.t - p.lost_timeout_s
         for l in [l for l in target if see.last_seen_t.get(l, -1e18) < horizon]:
             del target[l]

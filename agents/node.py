@@ -2,7 +2,8 @@
 
 Subscribes to its Sense (robot/N/sense), Task (robot/N/task) and body pose (robot/N/odom,
 telemetry only); publishes one CmdVel per Sense (same tick, at once: a lockstep world waits
-for it), its Status (every ``status_every`` Sense ticks and on every state/task change,
+for it; ``idle`` when the robot holds still with nothing to do, and a lockstep world then
+senses it only when something near it moves, world/wake.py), its Status (every ``status_every`` Sense ticks and on every state/task change,
 stamped with the tick, published before the tick's CmdVel, whose status_seq names it; once
 at start; and, except in lockstep, once a second while no Sense arrives) and the relay of
 its body pose (Pose, source "agent", on robot/N/pose).
@@ -41,6 +42,8 @@ from .params import ROBOT_KINDS, AgentParams, ParamError, from_toml_text, parse_
 HEARTBEAT_S = 1.0
 TASK_WAIT_S = 2.0    # wall seconds a Sense waits for the task it announces
 BODILESS_NOTICE_S = 30.0   # wall seconds between "no body yet" notices of an available agent
+IDLE_WAIT_S = 0.5    # wall seconds the loop sleeps with nothing to do (an idle robot in a
+                     # lockstep world gets a Sense only every few seconds: world/wake.py)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -49,6 +52,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--id", type=int, required=True, help="robot id (>= 0)")
     p.add_argument("--kind", choices=ROBOT_KINDS, default=None,
                    help="override [robots].kind of the run config")
+    p.add_argument("--reserve", action="store_true",
+                   help="started ahead of its robot by `swarmcover run` (its reserve): waits "
+                        "for a body without offering itself as available")
     p.add_argument("--live", action="store_true",
                    help="this agent drives a live robot (reported in Status)")
     p.add_argument("--v-max", type=float, default=None, help="override [robots].v_max (m/s)")
@@ -117,10 +123,11 @@ class AgentNode:
     """The process loop around an :class:`agents.core.AgentCore`: decode, step, publish."""
 
     def __init__(self, session, keys: Keys, rid: int, params: AgentParams, live: bool,
-                 log: logging.Logger, lockstep: bool = False):
+                 log: logging.Logger, lockstep: bool = False, reserve: bool = False):
         self.session, self.keys, self.rid, self.p, self.live, self.log = (
             session, keys, rid, params, live, log)
         self.lockstep = lockstep
+        self.reserve = reserve   # run's reserve: its robot's id is run's to give, not ours
         self.core = AgentCore(params, rid, live=live, log=log)
         self.beh = self.core.beh
         self.rx = Receiver(log)
@@ -151,7 +158,8 @@ class AgentNode:
         s, k = self.session, self.keys
         # available (no body yet) before alive: a coordinator that sees both in order never
         # takes a waiting agent for a robot of its swarm; dropped with the first Sense
-        self.avail_token = s.liveliness().declare_token(k.avail(self.rid))
+        if not self.reserve:
+            self.avail_token = s.liveliness().declare_token(k.avail(self.rid))
         self.token = s.liveliness().declare_token(k.alive("robot", self.rid))
         self.pub_cmd = publisher(s, k.cmd_vel(self.rid), block=True, express=True)
         self.pub_status = publisher(s, k.status(self.rid), block=True)
@@ -271,7 +279,8 @@ class AgentNode:
             self._put_status(st)
         # after the tick's status: its seq tells a lockstep world (and so the coordinator)
         # which statuses this tick produced
-        out = CmdVel(robot=self.rid, tick=sense.tick, status_seq=self.core.seq)
+        out = CmdVel(robot=self.rid, tick=sense.tick, status_seq=self.core.seq,
+                     idle=self.core.idle)
         if cmd is not None:
             out.vx, out.vy, out.wz = cmd.vx, cmd.vy, cmd.wz
         self.last_cmd = out.encode()
@@ -317,7 +326,8 @@ def _serve(args, session, keys, stop) -> int:
                       args.id, keys.prefix, keys.alive("robot", args.id))
             return 2
         lockstep = world_mode(args, session, keys, stop, log) == "lockstep"
-        node = AgentNode(session, keys, args.id, params, args.live, log, lockstep=lockstep)
+        node = AgentNode(session, keys, args.id, params, args.live, log, lockstep=lockstep,
+                         reserve=args.reserve)
         node.open()
         node.publish_status()
         ready(f"agent {args.id} kind={params.kind}")
@@ -326,7 +336,7 @@ def _serve(args, session, keys, stop) -> int:
         parent = args.parent_pid
         mb = node.mailbox
         while not stop.is_set():
-            item = mb.get(timeout=0.2 if node.held is None else 0.02)
+            item = mb.get(timeout=IDLE_WAIT_S if node.held is None else 0.02)
             if item is not None or node.held is not None:
                 node.handle(([item] if item is not None else []) + mb.drain())
             if parent is not None and os.getppid() != parent:
@@ -340,7 +350,8 @@ def _serve(args, session, keys, stop) -> int:
                 log.warning("robot %d has no body yet: available, waiting for the "
                             "coordinator to place it (is a run going in swarm %s?)",
                             args.id, keys.prefix)
-        node.stop_robot()
+        if node.live or node.core.ticks:   # a virtual robot never sensed has no body to stop
+            node.stop_robot()
         log.info("robot %d stopped: %d ticks, %d skipped or repeated, %d invalid messages, "
                  "%d behaviour errors, %d ticks without an announced task", args.id,
                  node.core.ticks, node.skipped, node.rx.invalid_total, node.core.errors,

@@ -18,13 +18,14 @@ from .control import FrameTracker, circmean, unit, wrap
 class Perception:
     """One robot's view of the world, refreshed by :meth:`update` once per Sense tick."""
 
-    __slots__ = ("robot", "n", "t", "dt", "seen", "back", "obst", "bump", "last_seen",
+    __slots__ = ("robot", "n", "t", "tick", "dt", "seen", "back", "obst", "bump", "last_seen",
                  "last_seen_t", "bumped_t", "heading", "advance")
 
     def __init__(self, robot: int, dt: float):
         self.robot = robot
         self.n = 0                   # Sense ticks handled
         self.t: float | None = None  # Sense.t of the current tick (s)
+        self.tick = -1               # Sense.tick of the current tick
         self.dt = dt                 # last measured tick length (s), the nominal dt at first
         self.seen: dict[int, float] = {}   # neighbour id -> bearing (rad, body frame)
         self.back: dict[int, float] = {}   # neighbour id -> its bearing of us (rad, its frame)
@@ -41,12 +42,16 @@ class Perception:
         """Take one Sense tick. ``cmd`` (body-frame vx, vy in m/s, wz in rad/s) is the
         command published for the previous tick and ``intent`` the body-frame direction
         (rad) it meant, or None; both are dead-reckoned over the elapsed time. Returns that
-        elapsed time (s, clamped to [0, 1])."""
-        dt = 0.0 if self.t is None else s.t - self.t
-        dt = min(1.0, max(0.0, dt))
+        elapsed time (s, clamped to [0, 1]). ``dt`` becomes the length of one tick: the
+        elapsed time over the ticks elapsed, as a robot that holds still may be sensed only
+        every few ticks (world.wake)."""
+        raw = 0.0 if self.t is None else s.t - self.t
+        dt = min(1.0, max(0.0, raw))
         if dt > 0:
-            self.dt = dt
+            ticks = s.tick - self.tick if self.tick >= 0 else 1
+            self.dt = min(1.0, raw / ticks) if ticks > 1 else dt
         self.t = s.t
+        self.tick = s.tick
         self.n += 1
         c = cmd
         if dt > 0 and (c.vx or c.vy or c.wz):

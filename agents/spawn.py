@@ -30,6 +30,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="if one agent dies, stop them all and exit 1")
     p.add_argument("--grace", type=float, default=5.0,
                    help="seconds to wait for agents to stop before SIGKILL (default 5)")
+    p.add_argument("--max-starting", type=int, default=8, metavar="K",
+                   help="agents starting at once: the next one starts when one of K is up "
+                        "(READY); 500 agents started together on 2 cores timed out "
+                        "connecting to the router (default 8; 0: no limit)")
     p.add_argument("--new-session", action="store_true",
                    help="start agents in their own process groups (only spawn gets ^C)")
     p.add_argument("--log-level", default="INFO")
@@ -44,6 +48,8 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"n = {args.n}: must be >= 1")
     if args.first_id < 0:
         p.error(f"--first-id {args.first_id}: must be >= 0")
+    if args.max_starting < 0:
+        p.error(f"--max-starting {args.max_starting}: must be >= 0")
     if "--id" in rest or any(a.startswith("--id=") for a in rest):
         p.error("--id: spawn assigns robot ids itself (use --first-id)")
     if "--parent-pid" in rest:
@@ -54,7 +60,12 @@ def main(argv: list[str] | None = None) -> int:
     with Shutdown((signal.SIGINT, signal.SIGTERM, signal.SIGHUP), grace_s=0) as stop:  # supervisor
         try:
             for rid in range(args.first_id, args.first_id + args.n):
-                pid = sup.start(rid)
+                while (args.max_starting and not stop.is_set()
+                       and len(sup.starting()) >= args.max_starting):
+                    stop.wait(0.02)
+                if stop.is_set():
+                    break
+                pid = sup.start(rid, watch_ready=bool(args.max_starting))
                 print(f"agent {rid} pid {pid}", flush=True)
             print(f"READY spawn {args.n}", flush=True)
             while not stop.is_set():

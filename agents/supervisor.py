@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import logging
 import os
+import select
 import signal
 import subprocess
 import sys
 import time
 from dataclasses import dataclass
 from typing import IO, Sequence
+
+from swarmcover.bus.node import READY_FD_ENV
 
 log = logging.getLogger("swarmcover.supervisor")
 
@@ -26,10 +29,16 @@ class Child:
     proc: subprocess.Popen
     argv: list[str]
     started: float
+    ready_fd: int | None = None     # read end of its readiness pipe, until it said READY
 
     @property
     def pid(self) -> int:
         return self.proc.pid
+
+    def close_ready(self) -> None:
+        if self.ready_fd is not None:
+            os.close(self.ready_fd)
+            self.ready_fd = None
 
 
 class Supervisor:
@@ -55,18 +64,46 @@ class Supervisor:
                 "--parent-pid", str(os.getpid()), *self.agent_args, *extra]
 
     def start(self, rid: int, extra: Sequence[str] = (), *, stdout: IO | int | None = None,
-              stderr: IO | int | None = None) -> int:
+              stderr: IO | int | None = None, watch_ready: bool = False) -> int:
         """Start the agent of robot ``rid``; returns its pid. Raises ValueError if that
-        robot's agent is already running."""
+        robot's agent is already running. ``watch_ready``: give it a readiness pipe
+        (bus.node.ready writes to it), so :meth:`starting` can tell when it serves."""
         cur = self.children.get(rid)
         if cur is not None and cur.proc.poll() is None:
             raise ValueError(f"robot {rid}: an agent is already running (pid {cur.pid})")
         argv = self.argv(rid, extra)
-        proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=stdout, stderr=stderr,
-                                env=self.env, cwd=self.cwd, start_new_session=self.new_session)
-        self.children[rid] = Child(rid, proc, argv, time.monotonic())
+        env, fds, rfd = self.env, (), None
+        if watch_ready:
+            rfd, wfd = os.pipe()
+            env = dict(os.environ if env is None else env, **{READY_FD_ENV: str(wfd)})
+            fds = (wfd,)
+        try:
+            proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=stdout,
+                                    stderr=stderr, env=env, cwd=self.cwd, pass_fds=fds,
+                                    start_new_session=self.new_session)
+        finally:
+            for fd in fds:
+                os.close(fd)
+        self.children[rid] = Child(rid, proc, argv, time.monotonic(), rfd)
         log.debug("started agent %d (pid %d)", rid, proc.pid)
         return proc.pid
+
+    def starting(self) -> list[int]:
+        """Robot ids of children started with ``watch_ready`` that have not said READY yet
+        and still run (a child that exited no longer counts)."""
+        out = []
+        for rid, c in self.children.items():
+            if c.ready_fd is None:
+                continue
+            if c.proc.poll() is not None:
+                c.close_ready()
+                continue
+            r, _, _ = select.select([c.ready_fd], [], [], 0)
+            if r:
+                c.close_ready()        # READY (or the pipe closed: it exited)
+            else:
+                out.append(rid)
+        return out
 
     def running(self) -> dict[int, int]:
         """Robot id -> pid of the children still running."""
@@ -79,6 +116,7 @@ class Supervisor:
             rc = c.proc.poll()
             if rc is not None:
                 out.append((rid, rc))
+                c.close_ready()
                 del self.children[rid]
         return out
 
@@ -92,16 +130,24 @@ class Supervisor:
 
     def stop(self, rid: int, timeout: float = 5.0, sig: int = signal.SIGTERM) -> int | None:
         """Stop one agent (signal, then SIGKILL after ``timeout`` s); returns its code."""
-        c = self.children.pop(rid, None)
-        if c is None:
-            return None
-        return _stop([c], timeout, sig)[rid]
+        return self.stop_many([rid], timeout, sig).get(rid)
+
+    def stop_many(self, rids, timeout: float = 5.0,
+                  sig: int = signal.SIGTERM) -> dict[int, int]:
+        """Stop these agents at once (``sig`` to all, SIGKILL those still up after
+        ``timeout`` s in total); robot id -> return code of those that were running."""
+        children = [c for c in (self.children.pop(r, None) for r in rids) if c is not None]
+        for c in children:
+            c.close_ready()
+        return _stop(children, timeout, sig)
 
     def stop_all(self, timeout: float = 5.0, sig: int = signal.SIGTERM) -> dict[int, int]:
         """Stop every agent: ``sig`` to all, wait up to ``timeout`` s in total, SIGKILL the
         rest, reap all. Returns robot id -> return code."""
         children = list(self.children.values())
         self.children.clear()
+        for c in children:
+            c.close_ready()
         return _stop(children, timeout, sig)
 
     def __enter__(self) -> "Supervisor":

@@ -1,12 +1,15 @@
 """Coverage benchmark: every config in configs/ (or those named), lockstep, fixed seeds.
 
 Default: the real distributed system (`swarmcover run --lockstep`, one process per robot).
-``--inproc``: the same parts in one process (swarmcover.simloop), about 10x faster, for
-tuning. Prints each run's numbers against the targets, progress on stderr, and one JSON
-object as the last line.
+``--inproc``: the same parts in one process (swarmcover.simloop), faster, for tuning.
+``--both``: each config and seed both ways in this invocation, with the two runs' agreement
+(robots, cycles, simulated time: the one runtime, issue 17) and the distributed wall time
+over the in-process one (issue 18). Prints each run's numbers against the targets, progress
+on stderr, and one JSON object as the last line.
 
     python bench/coverage.py                       # all configs, distributed
     python bench/coverage.py configs/small.toml --inproc --seeds 0 1 2
+    python bench/coverage.py --both --seeds 0      # every config both ways
 
 Targets (issue 19, against the Euler lower bound ``euler_bound`` that summary.json reports
 for every run): certified with ground-truth coverage >= 99.5%; robots_used <= 1.25 x
@@ -102,6 +105,34 @@ def table(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
+SAME = ("certified", "robots_used", "cycles", "sim_time_s")
+
+
+def agreement(inproc: dict, dist: dict) -> dict:
+    """One config and seed both ways: do they agree, and the wall-time ratio."""
+    same = all(inproc.get(k) == dist.get(k) if k != "sim_time_s"
+               else abs((inproc.get(k) or 0) - (dist.get(k) or 0)) < 1e-6 for k in SAME)
+    wi, wd = inproc.get("wall_time_s"), dist.get("wall_time_s")
+    return {"name": dist.get("name"), "seed": dist.get("seed"), "same": same,
+            **{f"{k}_inproc": inproc.get(k) for k in SAME},
+            **{f"{k}_distributed": dist.get(k) for k in SAME},
+            "wall_inproc_s": wi, "wall_distributed_s": wd,
+            "wall_ratio": round(wd / wi, 2) if wi and wd else None}
+
+
+def agreement_table(pairs: list[dict]) -> str:
+    lines = ["| config | seed | same | robots | cycles | sim s | wall in-process / "
+             "distributed (s) | ratio |", "|---|---|---|---|---|---|---|---|"]
+    for p in pairs:
+        cell = (lambda k: f"{p[k + '_inproc']}" if p[k + "_inproc"] == p[k + "_distributed"]
+                else f"{p[k + '_inproc']} / {p[k + '_distributed']}")
+        wi, wd = p["wall_inproc_s"] or 0, p["wall_distributed_s"] or 0
+        lines.append(f"| {p['name']} | {p['seed']} | {'yes' if p['same'] else 'NO'} | "
+                     f"{cell('robots_used')} | {cell('cycles')} | {cell('sim_time_s')} | "
+                     f"{wi:.0f} / {wd:.0f} | {p['wall_ratio']} |")
+    return "\n".join(lines)
+
+
 def _inproc_reason(res) -> str:
     """summary.json's stop_reason for an in-process run."""
     why = res.stop_reason or ""
@@ -136,6 +167,8 @@ def main(argv=None) -> int:
     p.add_argument("configs", nargs="*", help="default: configs/*.toml except mixed.toml")
     p.add_argument("--seeds", type=int, nargs="+", default=[0])
     p.add_argument("--inproc", action="store_true", help="one process (swarmcover.simloop)")
+    p.add_argument("--both", action="store_true",
+                   help="each run in-process and distributed; report agreement and wall ratio")
     p.add_argument("--timeout", type=float, default=3600.0, help="wall seconds per run")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                    help="with --inproc: override a [coordinator] field, e.g. door_min_rv=0.3 "
@@ -153,24 +186,30 @@ def main(argv=None) -> int:
             p.error(f"--set {item!r}: not FIELD=VALUE")
     if overrides and not args.inproc:
         p.error("--set needs --inproc (a distributed run reads [coordinator] from its config)")
+    if args.both and args.inproc:
+        p.error("--both runs in-process and distributed: drop --inproc")
     configs = args.configs or sorted(str(c.relative_to(ROOT)) for c in (ROOT / "configs").glob("*.toml")
                                      if c.name != "mixed.toml")
-    results = []
+    results, pairs = [], []
     t0 = time.monotonic()
+    modes = ["inproc", "distributed"] if args.both else \
+        ["inproc" if args.inproc else "distributed"]
     for k, config in enumerate(configs):
         name = Path(config).stem
-        for seed in args.seeds:
-            print(f"[{k + 1}/{len(configs)}] {name} seed {seed} "
-                  f"({'in-process' if args.inproc else 'distributed'}) ... "
+        for seed, mode in ((seed, mode) for seed in args.seeds for mode in modes):
+            print(f"[{k + 1}/{len(configs)}] {name} seed {seed} ({mode}) ... "
                   f"elapsed {time.monotonic() - t0:.0f} s", file=sys.stderr, flush=True)
-            if args.inproc:
+            if mode == "inproc":
                 s = run_inproc(config, seed, args.timeout, overrides)
             else:
                 with tempfile.TemporaryDirectory() as d:
                     s = run_distributed(config, seed, Path(d) / "run", args.timeout)
             s["name"] = name
             s.setdefault("seed", seed)
+            s.setdefault("mode", mode)
             results.append(s)
+            if args.both and mode == "distributed":
+                pairs.append(agreement(results[-2], s))
             ms = s.get("mean_spacing")
             print(f"  {name} seed {seed}: certified={s['certified']} ({s.get('stop_reason')}) "
                   f"robots_used={s['robots_used']} euler_bound={s.get('euler_bound')} "
@@ -184,9 +223,12 @@ def main(argv=None) -> int:
             "ideal_count_same_spacing", "ratio_same_spacing", "coverage", "false_certificate",
             "uncovered_reachable_m2", "cycles", "sim_time_s", "wall_time_s", "mode")
     print(table(results), flush=True)
+    if pairs:
+        print(agreement_table(pairs), flush=True)
     from swarmcover.run import strict_json
     print(strict_json({"bench": "coverage", "overrides": overrides,
-                       "runs": [{k: s.get(k) for k in keys} for s in results]}))
+                       "runs": [{k: s.get(k) for k in keys} for s in results],
+                       "both": pairs}))
     return 0
 
 

@@ -55,7 +55,7 @@ def payloads(keys: Keys, n: int) -> list[tuple[str, bytes]]:
 
 
 def bench_sink(items, tmp: Path) -> dict:
-    from swarmcover.record import McapSink
+    from swarmcover.recording.record import McapSink
     t = time.perf_counter()
     with open(tmp / "plain.bin", "wb") as f:
         for i, (k, d) in enumerate(items):
@@ -103,7 +103,7 @@ def _deliver(pub_s, items, done, timeout=120.0) -> float:
 
 def bench_recorder(items, keys: Keys, tmp: Path) -> dict:
     from swarmcover.bus.session import Mailbox
-    from swarmcover.record import Recorder
+    from swarmcover.recording.record import Recorder
     port = free_port()
     router = subprocess.Popen([sys.executable, "-m", "swarmcover", "router", "--listen",
                                f"tcp/127.0.0.1:{port}"], cwd=ROOT, stdout=subprocess.PIPE,
@@ -144,8 +144,8 @@ def bench_recorder(items, keys: Keys, tmp: Path) -> dict:
 
 
 def bench_plot_load(tmp: Path, cycles: int = 200) -> dict:
-    from swarmcover.record import McapSink
-    from swarmcover.replay import read_messages
+    from swarmcover.recording.record import McapSink
+    from swarmcover.recording.replay import read_messages
     from swarmcover.plot import load_run
     from swarmcover.viz.synth import Scenario
     k = Keys("bench")
@@ -179,8 +179,8 @@ def bench_writers(items, tmp: Path, scenes: int = 200) -> dict:
     import foxglove
     from mcap.writer import CompressionType, Writer
 
-    from swarmcover.record import McapSink, payload_to_json, schema_bytes
-    from swarmcover.scene import SCENE_TOPIC, SceneState, scene_schema
+    from swarmcover.recording.record import McapSink, payload_to_json, schema_bytes
+    from swarmcover.recording.scene import SCENE_TOPIC, SceneState, scene_schema
     from swarmcover.viz.synth import Scenario
     sc = Scenario(n_max=60)
     st = SceneState()

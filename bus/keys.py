@@ -16,9 +16,14 @@ _SWARM_RE = re.compile(r"^[A-Za-z0-9_\-]{1,64}$")
 
 def check_swarm(name: str) -> str:
     """Validate a swarm name: 1-64 of letters, digits, '_' or '-' (one key chunk)."""
+    return check_name(name, "swarm name")
+
+
+def check_name(name: str, what: str = "host name") -> str:
+    """Validate a name that is one key chunk (a swarm's, a host's): 1-64 of letters,
+    digits, '_' or '-'."""
     if not isinstance(name, str) or not _SWARM_RE.match(name):
-        raise ValueError(
-            f"swarm name {name!r} is invalid: use 1-64 letters, digits, '_' or '-'")
+        raise ValueError(f"{what} {name!r} is invalid: use 1-64 letters, digits, '_' or '-'")
     return name
 
 
@@ -35,9 +40,12 @@ class Topic:
 
 TOPICS: tuple[Topic, ...] = (
     Topic("robot/{id}/sense", "Sense", "world", "agent {id}", "BLOCK",
-          "bearings of visible robots + touch sectors, one per tick"),
+          "bearings of visible robots + touch sectors, one per tick (lockstep: an idle robot "
+          "only while it or a robot near it moves, when asked, and every "
+          "`[sensing] idle_keepalive_s`: [docs/determinism.md](docs/determinism.md))"),
     Topic("robot/{id}/cmd_vel", "CmdVel", "agent {id}", "world (virtual) / hwbridge (live)",
-          "BLOCK", "body-frame velocity command answering a Sense tick"),
+          "BLOCK", "body-frame velocity command answering a Sense tick; `idle`: holding "
+          "still with nothing to do"),
     Topic("robot/{id}/odom", "Pose", "world / hwbridge", "agent {id}", "DROP",
           "pose as reported by the robot's body (telemetry, never used for control)"),
     Topic("robot/{id}/pose", "Pose", "agent {id}", "recorders, viewers", "DROP",
@@ -156,6 +164,36 @@ class Keys:
 
     def avail_robots(self) -> str:
         return f"{self.prefix}/avail/robot/*"
+
+    # -- hosts (``swarmcover host``: a machine that offers to start agents for a run)
+    def host(self, name: str) -> str:
+        """A host's queryable: an empty query gets its slots, a start or stop request its
+        answer (swarmcover/hosts.py)."""
+        return f"{self.prefix}/host/{check_name(name)}"
+
+    def host_event(self, name: str) -> str:
+        """What a host reports on its own: one of its agents became ready or exited."""
+        return f"{self.prefix}/host/{check_name(name)}/event"
+
+    def host_events(self) -> str:
+        return f"{self.prefix}/host/*/event"
+
+    def alive_hosts(self) -> str:
+        return f"{self.prefix}/alive/host/*"
+
+    def alive_runs(self) -> str:
+        """The liveliness tokens of the ``swarmcover run`` processes of this swarm: a host
+        stops the agents of a run whose token went away."""
+        return f"{self.prefix}/alive/run/*"
+
+    def host_name(self, key: str) -> str | None:
+        """The host name in this swarm's ``host/<name>[/...]`` or ``alive/host/<name>``."""
+        parts = self.relative(key).split("/")
+        if parts[:2] == ["alive", "host"]:
+            parts = parts[1:]
+        if len(parts) >= 2 and parts[0] == "host" and _SWARM_RE.match(parts[1]):
+            return parts[1]
+        return None
 
     @property
     def all(self) -> str:

@@ -475,6 +475,9 @@ class Sense(Message):
     # sent this robot before this tick (0: none yet); the agent applies its tasks up to that
     # one before it steps. -1: no barrier, tasks apply as they arrive.
     task_id: int = f_int(-1, default=-1, optional=True)
+    # the coordinator asked every robot for its Status (CoordAck.report): publish one on
+    # this tick, whatever the status cadence
+    report: bool = f_bool(optional=True)
 
 
 @message("CmdVel")
@@ -493,6 +496,10 @@ class CmdVel(Message):
     # lockstep world announces it in the next Clock, so the coordinator knows which
     # statuses belong to the tick
     status_seq: int = f_int(-1, default=-1, optional=True)
+    # the robot holds still with no task running and stays so until what it senses changes
+    # (agents.core.AgentCore.idle): a lockstep world may stop sending it a Sense every tick
+    # (world.wake.WakeRule) and then no longer waits for it
+    idle: bool = f_bool(optional=True)
 
 
 @message("Pose")
@@ -731,6 +738,9 @@ class CoordAck(Message):
     spawn_live: list = f_bools()
     spawn_kinds: list = f_ints(0, len(ROBOT_KINDS) - 1)   # index into ROBOT_KINDS
     remove_ids: list = f_ints(0)
+    # every robot publishes a Status with its next Sense (Sense.report): the deployer wants
+    # fresh statuses (a cycle's snapshot) from robots the world may not be sensing every tick
+    report: bool = f_bool(optional=True)
 
 
 @message("Spawn")

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 from typing import Any, Callable
 
 from .session import Shutdown, add_zenoh_args, keys_from_args, open_session, setup_logging
@@ -110,6 +111,18 @@ def run_node(prog: str, description: str | None,
             session.close()
 
 
+READY_FD_ENV = "SWARMCOVER_READY_FD"
+
+
 def ready(what: str) -> None:
-    """Tell the supervisor (or a test) that this process serves: one ``READY`` line."""
+    """Tell the supervisor (or a test) that this process serves: one ``READY`` line, and a
+    byte on the pipe whose descriptor ``$SWARMCOVER_READY_FD`` names, if any (how
+    ``swarmcover spawn`` paces the agents it starts, agents.supervisor)."""
     print(f"READY {what}", flush=True)
+    fd = os.environ.pop(READY_FD_ENV, None)
+    if fd is not None:
+        try:
+            os.write(int(fd), b"R")
+            os.close(int(fd))
+        except (OSError, ValueError):
+            pass

@@ -105,6 +105,11 @@ def zenoh_argv(args: argparse.Namespace) -> list[str]:
     return out
 
 
+ROUTER_LIMITS = {"transport/unicast/accept_pending": "2000",
+                 "transport/unicast/accept_timeout": "30000",
+                 "transport/unicast/max_sessions": "10000"}
+
+
 def make_config(args: argparse.Namespace, mode: str | None = None) -> zenoh.Config:
     """Build a zenoh.Config from the layered flags. Raises ValueError naming a bad flag."""
     mode = mode or args.mode or getattr(args, "_zenoh_mode", "client")
@@ -127,6 +132,17 @@ def make_config(args: argparse.Namespace, mode: str | None = None) -> zenoh.Conf
         _insert(conf, "connect/timeout_ms", str(int(args.connect_timeout * 1000)), "--connect-timeout")
     if args.listen:
         _insert(conf, "listen/endpoints", json.dumps(args.listen), "--listen")
+    if not args.config:
+        # shared memory off: a router with it on refused every client after the 351st (Zenoh
+        # 1.10 here: each one's handshake maps a segment), and our messages are a few
+        # hundred bytes (--cfg transport/shared_memory/enabled:true turns it back on)
+        _insert(conf, "transport/shared_memory/enabled", "false", "shared memory")
+    if mode == "router" and not args.config:
+        # a swarm is hundreds of clients, many connecting at once while their processes
+        # start on a loaded box: Zenoh's defaults are 100 handshakes pending, 10 s each,
+        # and 1,000 sessions
+        for path, value in ROUTER_LIMITS.items():
+            _insert(conf, path, value, "router limits")
     _insert(conf, "scouting/multicast/enabled", "true" if args.multicast_scouting else "false",
             "--multicast-scouting")
     if getattr(args, "secure", None):

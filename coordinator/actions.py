@@ -39,12 +39,18 @@ class PublishComplex:
 
 
 @dataclass(frozen=True)
+class RequestStatus:
+    """Ask every robot for a Status now (a lockstep world may sense idle robots only every
+    few seconds: world/wake.py); the barrier's ack carries it (CoordAck.report)."""
+
+
+@dataclass(frozen=True)
 class Done:
     """The run is over: ``certified`` or stopped (Deployer.stop_reason says why)."""
     certified: bool
 
 
-Action = Union[SendTask, SpawnRobot, RemoveRobot, PublishComplex, Done]
+Action = Union[SendTask, SpawnRobot, RemoveRobot, PublishComplex, RequestStatus, Done]
 
 
 class Outbox:
@@ -75,5 +81,11 @@ class Outbox:
     def add(self, action: Action) -> None:
         self.actions.append(action)
 
+    def request_status(self) -> None:
+        """Ask every robot for a fresh Status (once per step)."""
+        if not any(isinstance(a, RequestStatus) for a in self.actions):
+            self.actions.append(RequestStatus())
 
-__all__ = ["Action", "Done", "Outbox", "PublishComplex", "RemoveRobot", "SendTask", "SpawnRobot"]
+
+__all__ = ["Action", "Done", "Outbox", "PublishComplex", "RemoveRobot", "RequestStatus",
+           "SendTask", "SpawnRobot"]

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from swarmcover.bus.messages import ROBOT_KINDS, Clock, CoordAck, Status
 
-from .actions import RemoveRobot, SendTask, SpawnRobot
+from .actions import RemoveRobot, RequestStatus, SendTask, SpawnRobot
 from .deployer import Deployer
 
 
@@ -109,6 +109,8 @@ def coord_ack(tick: int, actions) -> CoordAck:
                 ack.spawn_live.append(sp.live)
             case RemoveRobot(remove=rm):
                 ack.remove_ids.append(rm.robot)
+            case RequestStatus():
+                ack.report = True
     return ack
 
 

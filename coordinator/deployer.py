@@ -161,18 +161,19 @@ class Deployer:
     def step(self, now: float) -> list[Action]:
         """Advance the state machine at simulated time ``now``; return the actions to
         execute, in order (coordinator/actions.py)."""
-        self.out.actions = []
-        if self.done:
-            return self.out.actions
-        self._heartbeat(now)
-        self._phases[self.phase](now)
-        return self.out.actions
+        if not self.done:
+            self._heartbeat(now)
+            self._phases[self.phase](now)
+        # what was asked between steps (reopen_if_needed's status request) goes out too
+        actions, self.out.actions = self.out.actions, []
+        return actions
 
     # ------------------------------------------------------------------ phases
     def _phase_init(self, now: float) -> None:
         if not self.started:
             self.started = True
             self.phase_t = now
+            self.out.request_status()   # a restart: robots already deployed report at once
             return
         # a restart: robots already alive (liveliness history) must all report first
         alive = [r for r in self.robots.values() if r.alive and not r.dead]
@@ -225,6 +226,10 @@ class Deployer:
         fresh = all(self.robots[r].status.t >= self.phase_t for r in members)
         if not fresh and now - self.phase_t < self.cfg.settle_s + 5.0:
             return
+        # statuses were asked for when the phase began (a lockstep world senses an idle
+        # robot only now and then): a robot silent for cycles has not answered that either
+        for r in self.roster.silent(self.cycle, self.cfg.dead_after_cycles, self.vertex_of):
+            self._robot_died(r, now, f"no status for {self.cfg.dead_after_cycles} cycles")
         self._plan(now)
 
     def _phase_final(self, now: float) -> None:
@@ -405,18 +410,19 @@ class Deployer:
         self.pushes.robot_died(r.rid)
 
     def _heartbeat(self, now: float) -> None:
-        """Spec 6 [P]: a robot whose token has been gone for dead_grace_s (sim), or with no
-        status for dead_after_cycles cycles, is dead."""
+        """Spec 6 [P]: a robot whose token has been gone for dead_grace_s (sim) is dead (one
+        with no status for dead_after_cycles cycles too: checked before each plan,
+        :meth:`_phase_settle`)."""
         for r in self.roster.token_gone(now, self.cfg.dead_grace_s):
             self._robot_died(r, now, "liveliness token gone")
-        if self.phase != Phase.SETTLE:
-            return
-        for r in self.roster.silent(self.cycle, self.cfg.dead_after_cycles, self.vertex_of):
-            self._robot_died(r, now, f"no status for {self.cfg.dead_after_cycles} cycles")
 
     def _set_phase(self, phase: Phase, now: float) -> None:
         self.phase = Phase(phase)
         self.phase_t = now
+        if self.phase in (Phase.SETTLE, Phase.FINAL):
+            # the next plan reads every member's status: ask idle robots, which a lockstep
+            # world senses only now and then (world/wake.py), for a fresh one
+            self.out.request_status()
 
     # ------------------------------------------------------------------ report
     def summary(self) -> dict:

@@ -31,7 +31,7 @@ from swarmcover.bus.node import run_node
 from swarmcover.bus.session import Mailbox, Receiver, Shutdown, publisher, query_world_info
 from swarmcover.bus.trust import SignedPublisher, key_from_env
 
-from .actions import Done, PublishComplex, RemoveRobot, SendTask, SpawnRobot
+from .actions import Done, PublishComplex, RemoveRobot, RequestStatus, SendTask, SpawnRobot
 from .config import CoordinatorConfig
 from .core import CoordinatorCore, TickSync, robot_kinds_from_config
 from .deployer import Deployer
@@ -196,6 +196,8 @@ def _serve(args, session: zenoh.Session, keys: Keys, stop: Shutdown) -> int:
                     pub_spawn.put(sp.encode())
                 case RemoveRobot(remove=rm):
                     pub_remove.put(rm.encode())
+                case RequestStatus():
+                    pass   # in the ack (lockstep); without a barrier every robot is sensed
                 case PublishComplex(complex=cx):
                     pub_complex.put(cx.encode())
                     log.info("cycle %d: robots %d, complex %d vertices / %d edges / %d "

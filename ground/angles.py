@@ -69,22 +69,20 @@ def circular_mean(angles: Iterable[float]) -> tuple[float, float]:
 
     (0.0, 0.0) for an empty input; the mean is 0.0 when the angles cancel exactly.
     """
-    s = c = 0.0
-    n = 0
-    for a in angles:
-        s += math.sin(a)
-        c += math.cos(a)
-        n += 1
+    a = angles if isinstance(angles, (list, tuple)) else list(angles)
+    n = len(a)
     if n == 0:
         return 0.0, 0.0
+    s = sum(map(math.sin, a))   # left to right from 0, as a loop would add them
+    c = sum(map(math.cos, a))
     return wrap(math.atan2(s, c)), math.hypot(s, c) / n
 
 
 def circmean(angles: Iterable[float]) -> float | None:
     """Circular mean (rad, wrapped), or None if ``angles`` is empty or they cancel out."""
-    angles = list(angles)
-    mean, r = circular_mean(angles)
-    return None if r * len(angles) < 1e-9 else mean
+    a = angles if isinstance(angles, (list, tuple)) else list(angles)
+    mean, r = circular_mean(a)
+    return None if r * len(a) < 1e-9 else mean
 
 
 def resultant(angles: Iterable[float]) -> float:

@@ -61,6 +61,10 @@ DOCS: dict[str, dict[str, tuple[str, str]]] = {
         "robots_occlude": ("-", "robots block lines of sight"),
         "n_touch": ("-", "touch sectors around the body"),
         "touch_skin": ("m", "a contact is felt while the gap to a surface is below this"),
+        "idle_keepalive_s": ("sim s", "lockstep: an idle robot (holding still, nothing to do) "
+                             "is sensed at least this often; 0: every robot every tick"),
+        "idle_wake_s": ("sim s", "lockstep: an idle robot is sensed every tick while it or "
+                        "a robot within rv moved within this"),
     },
     "world": {
         "dt": ("s", "control tick"),

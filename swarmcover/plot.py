@@ -72,8 +72,8 @@ def load_run(path: str | Path, *, max_truth_frames: int = 400, progress: bool = 
     """Read a recording: the WorldInfo, and one Frame per Complex cycle (the last Complex of
     each cycle with the latest Truth before it); without Complexes, up to
     ``max_truth_frames`` Truths evenly spread in time."""
-    from swarmcover.progress import Progress
-    from swarmcover.replay import read_messages, summary_counts
+    from swarmcover.ground.progress import Progress
+    from swarmcover.recording.replay import read_messages, summary_counts
 
     src = find_recording(path)
     total, _ = summary_counts(src)
@@ -221,7 +221,7 @@ def make_plots(path: str | Path, out: str | Path | None = None, *, cycles: list[
                gif: bool = True, gif_frames: int = 80, fps: float = 5.0,
                progress: bool = True) -> list[Path]:
     """Everything ``swarmcover plot`` writes; returns the written paths."""
-    from swarmcover.progress import Progress
+    from swarmcover.ground.progress import Progress
 
     from swarmcover.viz.coverage import coverage_measure
     from swarmcover.viz.figures import render_progress, render_snapshot, snapshot_image, write_gif

@@ -4,7 +4,7 @@
 ``RMW_IMPLEMENTATION=rmw_zenoh_cpp`` against the same Zenoh router:
 
   <ns>/poses    geometry_msgs/msg/PoseArray        ground-truth robot poses (frame ``map``)
-  <ns>/complex  visualization_msgs/msg/MarkerArray the scene of swarmcover/scene.py as RViz
+  <ns>/complex  visualization_msgs/msg/MarkerArray the scene of recording/scene.py as RViz
                 markers: walls, sources, robots (virtual / live twin), robot ids, mocap,
                 Rips edges, frontier K, obstacle O, redundant robots, coverage
 

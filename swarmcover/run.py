@@ -45,9 +45,13 @@ from swarmcover.bus.messages import Complex, Spawn, Truth, WorldInfo
 from swarmcover.bus.session import (Receiver, Shutdown, add_zenoh_args, make_config, open_session,
                          setup_logging, zenoh_argv)
 from swarmcover.bus.trust import KEY_ENV, new_key, sample_origin, verify
+from swarmcover.hostpool import HostPool
+from swarmcover.hosts import agent_flags
+from swarmcover.reserve import AgentReserve
 
 log = logging.getLogger("swarmcover.run")
 MAX_COORDINATOR_RESTARTS = 3
+HOSTS_WAIT_S = 60.0     # run --hosts N: how long to wait for them before the first robot
 PY = [sys.executable, "-m", "swarmcover"]
 
 
@@ -381,6 +385,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--port", type=int, default=None,
                    help="port of the embedded router on 127.0.0.1 (default 7447, or a free one "
                         "if taken); --listen gives whole endpoints")
+    p.add_argument("--reserve", type=int, default=4, metavar="N",
+                   help="lockstep: keep N agent processes started ahead of the coordinator's "
+                        "next robots, so a new body never waits for its process to start "
+                        "(swarmcover/reserve.py; 0: none; not with hosts)")
+    p.add_argument("--hosts", type=int, default=0, metavar="N",
+                   help="wait (up to 60 s) for N hosts (`swarmcover host`) to announce "
+                        "themselves before the first robot; agents go to the hosts by free "
+                        "slots either way, and to this machine when no host has one")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.add_argument("--log-level", default="INFO")
     add_zenoh_args(p, helps=RUN_ZENOH_HELP,
@@ -473,27 +485,31 @@ class RunState:
     info: WorldInfo | None = None
     spawned: int = 0
     joined: int = 0          # robots placed from agents that joined by hand
+    by_host: dict = dataclasses.field(default_factory=dict)  # place -> agents started there
+    hosts: dict = dataclasses.field(default_factory=dict)    # host -> HostPool.report()
     restarts: int = 0
     epochs: dict = dataclasses.field(default_factory=dict)   # epoch -> [last cycle, healed]
     refused: dict = dataclasses.field(default_factory=dict)  # "complex: why" -> count
     recheck: dict | None = None
     limits: dict = dataclasses.field(default_factory=dict)   # robots_max and where from
     removed: set = dataclasses.field(default_factory=set)    # robots marked redundant so far
+    at_cx: Truth | None = None   # the world at the tick of last_cx (decided_truth)
 
     def saw_truth(self, truth: Truth | None) -> None:
         if truth is not None:
             self.last_truth = truth
             self.truths[truth.tick] = truth
             self.truths.pop(truth.tick - 400, None)
+            if self.last_cx is not None and abs(truth.t - self.last_cx.t) < 1e-6:
+                self.at_cx = truth
 
     def decided_truth(self) -> Truth | None:
         """The world at the tick of the last complex (lockstep: the same every run), not
-        wherever it had got to by the time the supervisor stopped; else the last one seen."""
-        if self.last_cx is not None:
-            at = [tr for tr in self.truths.values() if abs(tr.t - self.last_cx.t) < 1e-6]
-            if at:
-                return at[0]
-        return self.last_truth
+        wherever it had got to by the time the supervisor stopped; else the last one seen.
+        Kept aside when it arrives: a world left ticking while the run stops (nobody in its
+        roster any more) runs past the 400 ticks ``truths`` holds."""
+        return self.at_cx if self.last_cx is not None and self.at_cx is not None \
+            else self.last_truth
 
     def end(self, reason: str, detail: str = "", rc: int | None = None) -> bool:
         """Record why the run ends (the first reason wins)."""
@@ -510,6 +526,7 @@ class RunState:
         marks them while outside the complex), and the cycles so far (``on_cycle``)."""
         from swarmcover.viz.geometry import redundant_robots
         self.last_cx = cx
+        self.at_cx = next((tr for tr in self.truths.values() if abs(tr.t - cx.t) < 1e-6), None)
         self.removed |= redundant_robots(cx)
         return self.on_cycle(cx)
 
@@ -689,7 +706,7 @@ def _write_report(args, cfg, wmap, out: Path, state: RunState, t_wall0: float) -
                  stop_detail=state.detail, cycles=state.cycles,
                  sim_time_s=(truth.t if truth else 0.0),
                  wall_time_s=time.monotonic() - t_wall0, robots_spawned=state.spawned,
-                 robots_joined=state.joined,
+                 robots_joined=state.joined, agents_by_host=state.by_host, hosts=state.hosts,
                  failures_healed=state.failures_healed, coordinator_restarts=state.restarts,
                  certificate_recheck=state.recheck,
                  refused_messages=dict(sorted(state.refused.items())),
@@ -727,17 +744,9 @@ def _agent_args(spawn: Spawn, conf_path: str, live_limits: dict) -> list[str]:
     """A live robot's agent plans with the robot's own limits ([[hwbridge.robots]]), so the
     bridge's clamp does not rescale its turns behind its back. Env
     SWARMCOVER_AGENT_EXTRA_ARGS adds arguments to every agent (e.g. ``--log-level DEBUG``)."""
-    a = ["agent", "--id", str(spawn.robot), "--kind", spawn.kind, "--run-config", conf_path]
-    if spawn.live:
-        a.append("--live")
-        if spawn.robot in live_limits:
-            v_max, w_max = live_limits[spawn.robot]
-            a += ["--v-max", str(v_max), "--param", f"w_max={float(w_max)}"]
-    extra = os.environ.get("SWARMCOVER_AGENT_EXTRA_ARGS", "").strip()
-    if extra:
-        import shlex
-        a += shlex.split(extra)
-    return a
+    from swarmcover.hosts import agent_flags
+    return ["agent", "--id", str(spawn.robot),
+            *agent_flags(spawn.kind, conf_path, spawn.live, live_limits.get(spawn.robot))]
 
 
 def _live_limits(cfg, resolved: str, where: str) -> dict:
@@ -818,7 +827,7 @@ def _first_error(path: Path) -> str:
 def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Keys, out: Path,
                stop: Shutdown, state: RunState, t_wall0: float, live_limits: dict) -> None:
     from swarmcover.bus.session import query_world_info
-    from swarmcover.progress import Progress
+    from swarmcover.ground.progress import Progress
     from swarmcover.recheck import recheck
     from swarmcover.world.groundtruth import coverage_fraction
     rx = Receiver(log)
@@ -830,10 +839,38 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
             session.liveliness().declare_subscriber(keys.alive("coordinator", "*"),
                                                      inbox.callback, history=True),
             session.liveliness().declare_subscriber(keys.avail_robots(), inbox.callback,
-                                                     history=True)]
+                                                     history=True),
+            session.liveliness().declare_subscriber(keys.alive_hosts(), inbox.callback,
+                                                     history=True),
+            session.declare_subscriber(keys.host_events(), inbox.callback)]
+    pool = HostPool(session, keys, str(session.zid()), Path(conf_path).read_text())
+    if not args.secure:  # hosts stop the agents of a run whose token went away
+        subs.append(session.liveliness().declare_token(keys.alive("run", pool.run_id)))
     available: set[int] = set()     # agents up without a body (joined by hand, any host)
     robots_max = int(state.limits.get("robots_max") or 400)
     spawn_cap = robots_max + 8      # live agent processes; a few more for races and refills
+    reserve = AgentReserve(args.reserve if cfg.world.mode == "lockstep" else 0)
+
+    def top_up() -> None:
+        """Start the reserve's agents for the next ids, stop those passed over (from the
+        first Spawn on: agents that joined by hand before the run have announced themselves
+        by then, and their ids are not run's to take)."""
+        reserve.started = True
+        if pool.hosts:
+            reserve.size = 0      # agents go to the hosts
+        start, stop_ids = reserve.plan()
+        for rid in stop_ids:
+            c = launcher.children.get(f"agent-{rid}")
+            if c is not None:
+                c.signal(signal.SIGTERM)
+            unready.pop(f"agent-{rid}", None)
+        for rid in start:
+            name = f"agent-{rid}"
+            if name in launcher.children and launcher.children[name].alive():
+                continue
+            launcher.start(name, ["agent", "--id", str(rid), "--reserve",
+                                  *agent_flags(cfg.robots.kind, conf_path, False, None)])
+            unready[name] = 0.0
     stall = StallWatch(robots_max)
     unready: dict[str, float] = {}  # agent child name -> when we last looked for READY
     recorder = None
@@ -844,7 +881,7 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
     try:
         state.info = query_world_info(session, keys, 5.0, logger=log)
         if args.record:
-            from swarmcover.record import Recorder
+            from swarmcover.recording.record import Recorder
             recorder = Recorder(session, keys.all, str(out / "run.mcap"))
             recorder.start()
         hw = cfg.section("hwbridge")
@@ -861,6 +898,12 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
             if args.foxglove:
                 print(f"Foxglove/Lichtblick: open a connection to ws://127.0.0.1:{args.foxglove_port}",
                       file=sys.stderr, flush=True)
+        if args.hosts and not pool.wait(args.hosts, HOSTS_WAIT_S, stop):
+            state.end("error", f"{len(pool.hosts)} of the {args.hosts} hosts of --hosts "
+                      f"announced themselves within {HOSTS_WAIT_S:.0f} s ({pool.tally()}): "
+                      f"is `swarmcover host --swarm {keys.swarm}` running and linked to this "
+                      f"run's router?", EXIT_FAILED)
+            return
         _start_coordinator(launcher, conf_path, coord)
         last_check = 0.0
         while not stop.is_set() and not state.stop_reason:
@@ -868,10 +911,15 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                 rel = keys.relative(key)
                 if rel.startswith("alive/coordinator/"):
                     coord.token = kind == zenoh.SampleKind.PUT
+                elif rel.startswith("alive/host/") or rel.startswith("host/"):
+                    _host_sample(pool, keys, key, payload, kind, state)
                 elif rel.startswith("avail/robot/"):
                     rid = keys.robot_id(key)
                     if rid is not None and kind == zenoh.SampleKind.PUT:
                         available.add(rid)
+                        reserve.saw((rid,))
+                        if reserve.started:
+                            top_up()
                     elif rid is not None:
                         available.discard(rid)
                 elif rel == "world/spawn":
@@ -880,10 +928,25 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                         continue
                     why = coord.check(key, payload, zid, att)
                     name = f"agent-{sp.robot}"
-                    if not why and name in launcher.children:
+                    reserved = not why and reserve.take(sp.robot)
+                    if reserved and (sp.live or sp.kind != cfg.robots.kind
+                                     or not launcher.children[name].alive()):
+                        launcher.children[name].signal(signal.SIGTERM)   # not this one
+                        launcher.children[name].p.wait(10)
+                        launcher.children.pop(name).close()
+                        unready.pop(name, None)
+                        reserved = False
+                    if reserved:
+                        state.spawned += 1     # its agent runs already (the reserve)
+                        top_up()
+                        continue
+                    if not why and name in launcher.children \
+                            and not launcher.children[name].alive() and sp.robot in reserve.passed:
+                        launcher.children.pop(name).close()    # a reserve passed over, stopped
+                    if not why and (name in launcher.children or sp.robot in pool.placed):
                         why = f"robot {sp.robot} already has an agent"
-                    if not why and sum(1 for n, c in launcher.children.items()
-                                       if n.startswith("agent-") and c.alive()) >= spawn_cap:
+                    if not why and (_local_agents(launcher) - len(reserve.ids) + pool.running()
+                                    >= spawn_cap):
                         why = f"{spawn_cap} agents running (robots_max {robots_max} + 8)"
                     if why:
                         state.refuse("spawn", why)
@@ -899,9 +962,12 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                             "and the robot's limits" if sp.live else "")
                         state.joined += 1
                         continue
+                    state.spawned += 1
+                    top_up()
+                    if pool.place(sp, live_limits.get(sp.robot)) is not None:
+                        continue
                     launcher.start(name, _agent_args(sp, conf_path, live_limits))
                     unready[name] = 0.0
-                    state.spawned += 1
                 elif rel == "world/truth":
                     state.saw_truth(rx.decode(key, payload, Truth))
                 elif rel == "coord/complex":
@@ -930,7 +996,9 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                         f"cycle {total} | robots {cx.robots}/{robots_max} | frontier "
                         f"{len(cx.frontier)} | obstacle {len(cx.obstacle)} | covered "
                         f"{100 * coverage:.1f}% | sim {cx.t:.0f}s"
-                        + (f" | {waiting} joined, no body yet" if waiting else "")))
+                        + (f" | {waiting} joined, no body yet" if waiting else "")
+                        + (f" | agents {pool.tally(_local_agents(launcher))}"
+                           if pool.capacity else "")))
                     if cx.state == "certified":
                         pending_cert = (cx, time.monotonic())
                     elif cx.state == "stopped":
@@ -974,6 +1042,7 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
             now = time.monotonic()
             if now - last_check >= 0.5:
                 last_check = now
+                pool.refresh()
                 _check_agents(launcher, unready, state)
                 if state.stop_reason:
                     break
@@ -999,6 +1068,8 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                 break
     finally:
         _halt_movers(launcher)
+        pool.stop_all()
+        state.by_host, state.hosts = dict(pool.started), pool.report()
         progress.close(note=(f"cycle {state.cycles} | {state.stop_reason or 'stopping'}"
                              f"{': ' + state.detail if state.detail else ''}"))
         for s in subs:
@@ -1010,6 +1081,29 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
     for key, payload, *_ in inbox.items(0.0):
         if keys.relative(key) == "world/truth":
             state.saw_truth(rx.decode(key, payload, Truth))
+
+
+def _local_agents(launcher: Launcher) -> int:
+    """Agent processes of this run alive on this machine."""
+    return sum(1 for n, c in launcher.children.items() if n.startswith("agent-") and c.alive())
+
+
+def _host_sample(pool: HostPool, keys: Keys, key: str, payload: bytes, kind,
+                 state: RunState) -> None:
+    """A host's token came or went, or one of its events: an agent of this run that exited
+    before it was ready ends the run as a local one does (_check_agents)."""
+    name = keys.host_name(key)
+    if name is None:
+        return
+    if keys.relative(key).startswith("alive/"):
+        pool.on_token(name, kind == zenoh.SampleKind.PUT)
+        return
+    ev, ours = pool.on_event(payload)
+    if ev is None or not ours or ev.what != "failed":
+        return
+    state.end("agents_failed", f"agent-{ev.robot} on host {name} exited at start (exit "
+              f"{ev.rc}): {ev.detail}; see its log on that host",
+              EXIT_USAGE if ev.rc == EXIT_USAGE else EXIT_FAILED)
 
 
 def _halt_movers(launcher: Launcher, first: tuple = ("hwbridge",),

@@ -29,7 +29,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from swarmcover.bus.messages import Complex, Spawn
-from swarmcover.coordinator.actions import Done, PublishComplex, RemoveRobot, SendTask, SpawnRobot
+from swarmcover.coordinator.actions import (Done, PublishComplex, RemoveRobot, RequestStatus,
+                                            SendTask, SpawnRobot)
 
 log = logging.getLogger("swarmcover.simloop")
 
@@ -115,8 +116,8 @@ class SimLoop:
             match a:
                 case SendTask(robot=rid, task=task):
                     tasks.setdefault(rid, []).append(task)
-                case SpawnRobot() | RemoveRobot():
-                    pass
+                case SpawnRobot() | RemoveRobot() | RequestStatus():
+                    pass   # through the ack, as over Zenoh
                 case PublishComplex(complex=cx):
                     self.complexes.append(cx)
                 case Done():
@@ -174,9 +175,10 @@ class SimLoop:
         cmds = np.zeros((len(ids), 3))
         if ids and w.sense_due():
             row = {rid: k for k, rid in enumerate(ids)}
-            expected = w.expected()
+            senses = w.senses(ids, pos, th, barrier=True)
+            expected = w.expected()        # among the robots sensed this tick
             sync = self.coord.sync
-            for sense in w.senses(ids, pos, th, barrier=True):
+            for sense in senses:
                 rid = sense.robot
                 core = self.agents.get(rid)
                 if core is None:
@@ -191,7 +193,7 @@ class SimLoop:
                 if st is not None:
                     sync.add_status(st)
                 if rid in expected:
-                    w.answered(rid, core.seq)
+                    w.answered(rid, core.seq, core.idle)
                     if rid in w.joins:
                         w.joined.add(rid)
         for rid, ts in tasks.items():   # the coordinator's tasks of this tick: next Sense

@@ -60,6 +60,8 @@ def check_flags(args) -> None:
         ck.int_("--robots-max", args.robots_max, 1, 10**6)
     if args.seed is not None:
         ck.int_("--seed", args.seed, 0, 2**63 - 1)
+    if getattr(args, "hosts", 0):
+        ck.int_("--hosts", args.hosts, 0, 10_000)
     if args.router is not None:
         _check_endpoint(ck, "--router", args.router)
         if args.port is not None:

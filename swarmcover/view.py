@@ -19,7 +19,7 @@ nothing has arrived says which swarm and router it listens to. It exposes
 ``window.swarmState`` ({robots_drawn, robots_alive, cycle, px_per_m, hover, paused, ...})
 and mirrors it into ``<pre id="swarm-state">`` for headless tests.
 
-``--foxglove`` also serves the same scene as swarmcover/scene.py's ``foxglove.SceneUpdate``
+``--foxglove`` also serves the same scene as recording/scene.py's ``foxglove.SceneUpdate``
 on topic ``/swarmcover/scene`` through foxglove-sdk's WebSocket server (``--foxglove-port``,
 default 8766): in Foxglove or Lichtblick, "Open connection" -> Foxglove WebSocket ->
 ``ws://127.0.0.1:8766``, and add a 3D panel. ``--ros2`` publishes the swarm to ROS 2 over
@@ -284,7 +284,7 @@ class ViewServer:
         import foxglove
         from foxglove.channels import SceneUpdateChannel
 
-        from swarmcover.scene import SCENE_TOPIC, SceneState
+        from swarmcover.recording.scene import SCENE_TOPIC, SceneState
         self.scene = SceneState()
         self.fox_context = foxglove.Context()
         self.fox_channel = SceneUpdateChannel(SCENE_TOPIC, context=self.fox_context)

@@ -126,6 +126,21 @@ def wait_until(pred, timeout: float, interval: float = 0.05) -> bool:
     return wait_for(pred, timeout, interval)
 
 
+def decoded(mail, timeout: float):
+    """The messages arriving in ``mail`` (a bus.session.Mailbox), decoded, until ``timeout``
+    seconds have passed (undecodable payloads are skipped)."""
+    from swarmcover.bus.messages import WireError, decode
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        item = mail.get(0.05)
+        if item is None:
+            continue
+        try:
+            yield decode(item[1])
+        except WireError:
+            continue
+
+
 def toml_tables(name: str, *rows: dict) -> str:
     """TOML text of an array of tables ``[[name]]``, one per row (values as TOML literals:
     str quoted, lists and numbers as written), for configs written inline in tests."""

@@ -248,3 +248,16 @@ def test_children_of_a_killed_test_process_stop_too(procs):
     if alive:
         os.kill(pid, signal.SIGKILL)
     assert not alive, "the router outlived the process that started it"
+
+
+def test_the_router_takes_a_swarm_of_clients(router):
+    """A swarm is hundreds of client sessions: `swarmcover router` takes 500 (with Zenoh's
+    shared memory on, a router refused every client after the 351st)."""
+    sessions = []
+    try:
+        for _ in range(500):
+            sessions.append(client_session(router, "many"))
+        assert len(sessions) == 500
+    finally:
+        for s in sessions:
+            s.close()

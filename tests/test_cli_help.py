@@ -37,7 +37,7 @@ def test_config_flag_means_the_zenoh_config_in_every_help(name):
 
 # ---- every shared flag everywhere, and no help text naming a flag that does not exist
 
-SESSION_COMMANDS = ["run", "router", "world", "coordinator", "agent", "hwbridge", "fake-robot",
+SESSION_COMMANDS = ["run", "router", "host", "world", "coordinator", "agent", "hwbridge", "fake-robot",
                     "record", "replay", "view", "demo", "topics list", "topics echo",
                     "topics hz", "topics alive"]
 SUBCOMMANDS = {"topics": ["list", "echo", "hz", "alive"], "config": ["defaults", "docs", "check"],

@@ -80,6 +80,16 @@ def summary_of(proc):
     return json.loads(line.split("SUMMARY ", 1)[1])
 
 
+def _bridge(procs, router, zargs, path, text: str, record: list[str]):
+    """Write ``text`` to ``path``, start a bridge on it and wait for it; returns (bridge,
+    a client session, a Recorder of the keys ``record``): close the last two."""
+    path.write_text(text)
+    bridge = procs.swarmcover("hwbridge", path, *zargs)
+    bridge.wait_line("READY hwbridge", timeout=30)
+    s = client_session(router, zargs[zargs.index("--swarm") + 1])
+    return bridge, s, Recorder(s, record)
+
+
 def test_commands_deadman_geofence_ros2_and_odometry(procs, router, zargs, tmp_path):
     cfg = tmp_path / "cmd.toml"
     cfg.write_text(CMD_CONFIG)
@@ -187,14 +197,9 @@ body = "nobody"
 
 
 def test_mocap_silence_stops_the_robot_and_bodies_are_reported(procs, router, zargs, tmp_path):
-    cfg = tmp_path / "silence.toml"
-    cfg.write_text(SILENCE_CONFIG)
-    swarm = zargs[zargs.index("--swarm") + 1]
-    keys = Keys(swarm)
-    bridge = procs.swarmcover("hwbridge", cfg, *zargs)
-    bridge.wait_line("READY hwbridge", timeout=30)
-    s = client_session(router, swarm)
-    rec = Recorder(s, [keys.live_cmd(1)])
+    keys = Keys(zargs[zargs.index("--swarm") + 1])
+    bridge, s, rec = _bridge(procs, router, zargs, tmp_path / "silence.toml", SILENCE_CONFIG,
+                             [keys.live_cmd(1)])
     try:
         t_end = time.monotonic() + 5.5          # commands never stop; mocap has a 1.5 s gap
         while time.monotonic() < t_end:
@@ -251,14 +256,9 @@ def test_ros2_pose_stamped_mocap_source(procs, router, zargs, tmp_path):
     """A ROS 2 mocap node seen through zenoh-bridge-ros2dds: CDR PoseStamped on a raw key."""
     from swarmcover.hwbridge.frames import Transform2D, world_to_mocap
     from swarmcover.hwbridge.ros2 import PoseStamped, encode_pose_stamped
-    cfg = tmp_path / "ros_mocap.toml"
-    cfg.write_text(POSE_STAMPED_CONFIG)
-    swarm = zargs[zargs.index("--swarm") + 1]
-    keys = Keys(swarm)
-    bridge = procs.swarmcover("hwbridge", cfg, *zargs)
-    bridge.wait_line("READY hwbridge", timeout=30)
-    s = client_session(router, swarm)
-    rec = Recorder(s, [keys.odom(5)])
+    keys = Keys(zargs[zargs.index("--swarm") + 1])
+    bridge, s, rec = _bridge(procs, router, zargs, tmp_path / "ros_mocap.toml",
+                             POSE_STAMPED_CONFIG, [keys.odom(5)])
     try:
         pos, q = world_to_mocap(1.25, 0.75, -2.0, "z", Transform2D(1.0, 0.5, 0.25), 0.12)
         payload = encode_pose_stamped(PoseStamped(12.0, "mocap", pos, q))

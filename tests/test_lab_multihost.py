@@ -13,85 +13,24 @@ test skips after asserting that the agents in ns A were driven by the world in n
 """
 from __future__ import annotations
 
-import os
 import re
-import shutil
-import subprocess
-import sys
 import time
 import uuid
 
 import pytest
 
-from procs import ROOT
+from netns import in_ns as _in
+from netns import lab_or_skip
 
 RUN_BOUND_S = 120.0
-PY = sys.executable
 CONFIG = "configs/tiny.toml"
-
-
-def _ip(*args, ns: str | None = None) -> None:
-    cmd = (["ip", "netns", "exec", ns, "ip"] if ns else ["ip"]) + list(args)
-    r = subprocess.run(cmd, capture_output=True, text=True, timeout=15)
-    if r.returncode:
-        raise OSError(f"{' '.join(cmd)}: {r.stderr.strip()}")
-
-
-class Lab:
-    """Three namespaces around a router namespace; ``up()`` raises OSError if impossible."""
-
-    def __init__(self):
-        tag = f"{os.getpid() % 10000:04d}"
-        self.base = 100 + (os.getpid() % 48) * 3
-        self.r, self.w, self.a = f"sc{tag}r", f"sc{tag}w", f"sc{tag}a"
-        self.tag = tag
-        self.made: list[str] = []
-        self.host_veth = f"sc{tag}h1"
-
-    def addr(self, k: int, host: int) -> str:
-        return f"10.200.{self.base + k}.{host}"
-
-    def up(self) -> None:
-        for ns in (self.r, self.w, self.a):
-            subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=15)
-            _ip("netns", "add", ns)
-            self.made.append(ns)
-            _ip("link", "set", "lo", "up", ns=ns)
-        for k, peer in enumerate((self.w, self.a, None)):
-            ra, pb = f"sc{self.tag}{'wah'[k]}0", f"sc{self.tag}{'wah'[k]}1"
-            _ip("link", "add", ra, "type", "veth", "peer", "name", pb)
-            _ip("link", "set", ra, "netns", self.r)
-            if peer:
-                _ip("link", "set", pb, "netns", peer)
-            _ip("addr", "add", self.addr(k, 1) + "/24", "dev", ra, ns=self.r)
-            _ip("link", "set", ra, "up", ns=self.r)
-            _ip("addr", "add", self.addr(k, 2) + "/24", "dev", pb, ns=peer)
-            _ip("link", "set", pb, "up", ns=peer)
-
-    def down(self) -> None:
-        for ns in self.made:
-            subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=15)
-        subprocess.run(["ip", "link", "del", self.host_veth], capture_output=True, timeout=15)
 
 
 @pytest.fixture
 def lab():
-    if os.geteuid() != 0:
-        pytest.skip("network namespaces need root (CAP_NET_ADMIN); not root here")
-    if shutil.which("ip") is None:
-        pytest.skip("no `ip` command (Debian package iproute2)")
-    lab = Lab()
-    try:
-        lab.up()
-    except (OSError, subprocess.TimeoutExpired) as e:
-        lab.down()
-        pytest.skip(f"cannot create network namespaces here: {e}")
-    yield lab
-    lab.down()
-
-
-def _in(ns: str, *argv: str) -> list[str]:
-    return ["ip", "netns", "exec", ns, PY, "-m", "swarmcover", *argv]
+    with lab_or_skip("wa") as lab:
+        lab.w, lab.a = lab.ns("w"), lab.ns("a")
+        yield lab
 
 
 _VERDICT: dict = {}    # the plain run's outcome: a non-certifying coordinator is not re-waited

@@ -10,8 +10,11 @@ ROOT = Path(__file__).resolve().parent.parent
 
 # package -> packages it must never import (at any depth, lazily inside functions too)
 NEVER = {
-    "ground": {"agents", "bus", "coordinator", "hwbridge", "swarmcover", "viz", "world"},
-    "viz": {"swarmcover", "coordinator", "agents", "hwbridge"},
+    "ground": {"agents", "bus", "coordinator", "hwbridge", "recording", "swarmcover", "viz",
+               "world"},
+    "viz": {"swarmcover", "coordinator", "agents", "hwbridge", "recording"},
+    # recordings: the bus, the ground floor and the drawing library, never the commands
+    "recording": {"swarmcover", "coordinator", "agents", "hwbridge", "world"},
     # the topology core: numpy, scipy and the ground floor only; no bus, no process
     "coordinator/topology": {"agents", "bus", "coordinator", "hwbridge", "swarmcover", "viz",
                              "world", "zenoh", "msgpack"},
@@ -19,7 +22,7 @@ NEVER = {
 
 
 # the card's folders, installed as swarmcover.<name> (pyproject.toml's package-dir)
-FLOORS = ("agents", "bus", "coordinator", "ground", "hwbridge", "viz", "world")
+FLOORS = ("agents", "bus", "coordinator", "ground", "hwbridge", "recording", "viz", "world")
 
 
 def _package(module: str) -> str:
@@ -78,8 +81,10 @@ def test_lower_floors_never_import_upper_ones():
 
 def test_the_check_sees_an_import_inside_a_function_and_one_upwards(tmp_path):
     f = tmp_path / "m.py"
-    f.write_text("def g():\n    from swarmcover.replay import read_messages\n")
+    f.write_text("def g():\n    from swarmcover.run import main\n")
     assert "swarmcover" in _imported_packages(f)
+    f.write_text("def g():\n    from swarmcover.recording.replay import read_messages\n")
+    assert _imported_packages(f) == {"recording"}
     f.write_text("import swarmcover.agents.node as n\nfrom swarmcover.world import core\n")
     assert _imported_packages(f) == {"agents", "world"}
     f.write_text("from ..deployer import Deployer\n")

@@ -18,9 +18,9 @@ from swarmcover.bus import messages as m
 from swarmcover.bus.keys import Keys
 from swarmcover.bus.session import Mailbox
 from procs import client_session
-from swarmcover.record import (McapSink, Recorder, json_to_payload, payload_to_json,
+from swarmcover.recording.record import (McapSink, Recorder, json_to_payload, payload_to_json,
                                resolve_keyexpr, schema_for)
-from swarmcover.replay import (JsonDecoderFactory, read_messages, recorded_swarm, remap_key,
+from swarmcover.recording.replay import (JsonDecoderFactory, read_messages, recorded_swarm, remap_key,
                                summary_counts)
 from swarmcover.viz.synth import Scenario
 
@@ -369,7 +369,7 @@ def test_recorder_forgotten_stop_still_leaves_a_readable_file(router, tmp_path):
 import sys, time
 sys.path.insert(0, 'tests')
 from procs import client_session
-from swarmcover.record import Recorder
+from swarmcover.recording.record import Recorder
 from swarmcover.bus import messages as m
 s = client_session({router!r}, 'forgot')
 rec = Recorder(s, 'sc/forgot/**', {str(out)!r}).start()

@@ -92,6 +92,24 @@ def test_cycles_and_failures_healed_add_up_across_coordinator_restarts():
     assert st.rc == 1 and st.stop_reason == "robots_max" and not st.certified
 
 
+def test_the_decided_truth_outlives_a_world_that_ticks_on_while_the_run_stops():
+    """The summary's world is the one at the last complex's tick, even when the world ran
+    on for more than the 400 ticks the run keeps (its roster empty once agents stopped)."""
+    st = RunState()
+    tr = lambda k: Truth(tick=k, t=k * 0.05, ids=[1], x=[0.0], y=[0.0], theta=[0.0],  # noqa: E731
+                         live=[False])
+    for k in range(10):
+        st.saw_truth(tr(k))
+    st.saw_complex(Complex(cycle=3, epoch=1, t=0.45, state="certified"))
+    for k in range(10, 2000):
+        st.saw_truth(tr(k))
+    assert st.decided_truth().tick == 9 and st.last_truth.tick == 1999
+    st.saw_complex(Complex(cycle=4, epoch=1, t=200.0))   # its truth arrives after it
+    st.saw_truth(tr(4000))
+    assert st.decided_truth().tick == 4000
+    assert RunState().decided_truth() is None
+
+
 def _cx(cycle, vertices, frontier=1, obstacle=0, robots=None, epoch=1, state="running"):
     return Complex(cycle=cycle, epoch=epoch, vertices=list(vertices),
                    occupants=list(vertices), edges=[0, 1] * max(frontier, obstacle, 1),

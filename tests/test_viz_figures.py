@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from PIL import Image
 
 from swarmcover.bus import messages as m
-from swarmcover.progress import Progress
+from swarmcover.ground.progress import Progress
 from swarmcover.viz.coverage import coverage_measure, disk_coverage
 from swarmcover.viz.figures import render_progress, render_snapshot, snapshot_image, write_gif
 from swarmcover.viz.geometry import build_scene

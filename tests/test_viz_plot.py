@@ -8,7 +8,7 @@ import pytest
 from PIL import Image
 
 from swarmcover.bus.keys import Keys
-from swarmcover.record import McapSink
+from swarmcover.recording.record import McapSink
 from swarmcover import plot
 from swarmcover.viz.synth import Scenario
 

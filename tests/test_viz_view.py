@@ -319,7 +319,7 @@ def test_foxglove_websocket_client_receives_scene_updates(router, zargs, procs):
 
 def test_robots_removed_as_redundant_keep_their_own_mark_in_page_and_scene():
     from swarmcover.bus import messages as m
-    from swarmcover.scene import SceneState
+    from swarmcover.recording.scene import SceneState
     truth = m.Truth(tick=1, t=0.0, ids=[0, 1, 2, 3], x=[0.0, 1.0, 0.5, 3.0],
                     y=[0.0, 0.0, 0.8, 3.0], theta=[0.0] * 4, live=[False] * 4)
     first = m.Complex(cycle=1, vertices=[10, 11, 12, 13], occupants=[0, 1, 2, 3],
@@ -339,7 +339,7 @@ def test_robots_removed_as_redundant_keep_their_own_mark_in_page_and_scene():
     from mcap.records import Schema
     from mcap_protobuf.decoder import DecoderFactory
 
-    from swarmcover.scene import scene_schema
+    from swarmcover.recording.scene import scene_schema
     sch = scene_schema()
     decode = DecoderFactory().decoder_for("protobuf", Schema(id=1, name=sch.name,
                                                              encoding=sch.encoding, data=sch.data))

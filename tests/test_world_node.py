@@ -15,7 +15,7 @@ from swarmcover.bus.keys import Keys
 from swarmcover.bus.messages import (Clock, CmdVel, Pose, Remove, Sense, Spawn, Truth, TwinCmd, WorldInfo,
                           decode)
 from swarmcover.bus.session import Mailbox, put
-from procs import client_session
+from procs import client_session, decoded
 from swarmcover.world.config import loads_config
 
 pytestmark = pytest.mark.timeout(120)
@@ -315,12 +315,7 @@ def test_lockstep_barrier_with_a_coordinator(procs, router, zargs, tmp_path):
         join = join_ticks(0.05)
         spawn_tick, acked, clocks, senses, truths = 2, set(), {}, [], {}
         held = False
-        end = time.monotonic() + 60
-        while time.monotonic() < end:
-            item = mail.get(0.05)
-            if item is None:
-                continue
-            m = decode(item[1])
+        for m in decoded(mail, 60):
             if isinstance(m, Truth):
                 truths[m.tick] = m.ids
             elif isinstance(m, Sense):

@@ -89,13 +89,18 @@ class RobotsConfig:
 class SensingConfig:
     """[sensing]: camera rate (Hz), bearing noise sigma (degrees), dropout probability per
     sighting, whether robots block lines of sight, touch sectors, and the touch skin (m):
-    a contact is felt while the gap to a wall or robot surface is below it."""
+    a contact is felt while the gap to a wall or robot surface is below it. Lockstep with
+    the coordinator in the barrier: an idle robot (holding still, nothing to do) is sensed
+    only while it or a robot near it moved within idle_wake_s (sim s), when asked, and once
+    every idle_keepalive_s (sim s); 0 senses every robot every tick (world/wake.py)."""
     rate_hz: float = 20.0
     noise_deg: float = 0.5
     dropout: float = 0.0
     robots_occlude: bool = False
     n_touch: int = 8
     touch_skin: float = 0.015
+    idle_keepalive_s: float = 2.0
+    idle_wake_s: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -263,7 +268,9 @@ def _parse_sensing(d: dict, file: str) -> SensingConfig:
         dropout=sec.field_num("dropout", 0.0, 1.0),
         robots_occlude=sec.field_bool("robots_occlude"),
         n_touch=sec.field_int("n_touch", 1, 360),
-        touch_skin=sec.field_num("touch_skin", 0.0, 10.0))
+        touch_skin=sec.field_num("touch_skin", 0.0, 10.0),
+        idle_keepalive_s=sec.field_num("idle_keepalive_s", 0.0, 3600.0),
+        idle_wake_s=sec.field_num("idle_wake_s", 0.0, 3600.0))
 
 
 def _parse_world(d: dict, file: str) -> WorldConfig:

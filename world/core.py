@@ -12,6 +12,11 @@ Per tick k of lockstep, the order both callers follow: ``apply`` the spawns and 
 the coordinator's ack of k-1 (``ack_ops``), ``boundary`` (deaths, joins, agents that
 appeared), ``clock`` and ``senses`` for tick k, the agents' answers (``answered``) and the
 coordinator's ack (``on_ack``), then ``step`` with the commands.
+
+With the coordinator in the barrier, ``senses`` leaves out idle robots that have nothing new
+to sense (world/wake.py, ``[sensing] idle_keepalive_s``) and ``expected`` waits only for the
+robots it sensed. What an ack asks (a task announced to a robot, a Status from everyone)
+takes effect at the next tick's ``senses``, whichever of the two the caller runs first.
 """
 from __future__ import annotations
 
@@ -25,6 +30,7 @@ from .config import RunConfig
 from .maps import WorldMap
 from .physics import Physics
 from .sensing import Sensors
+from .wake import WakeRule, wake_params
 
 JOIN_S = 0.05          # lockstep barrier: a spawned body's agent takes part this many sim
                        # seconds (at least one tick) after the body appears; that tick waits
@@ -84,6 +90,13 @@ class WorldCore:
         self.joined: set[int] = set()          # joiners that answered their first tick
         self.status_seq: dict[int, int] = {}   # rid -> seq announced by its last command
         self.task_last: dict[int, int] = {}    # rid -> last task id an ack announced
+        # idle robots (world/wake.py): off with idle_keepalive_s = 0
+        self.wake = (WakeRule(**wake_params(cfg.rv, cfg.robots.v_max, w.dt, self.sense_every,
+                                            sc.idle_keepalive_s, sc.idle_wake_s))
+                     if sc.idle_keepalive_s > 0 else None)
+        self.idle: set[int] = set()            # robots whose last command said idle
+        self.sensed: set[int] = set()          # robots sensed at the current tick
+        self._asks: list[tuple[int, list[int], bool]] = []   # acks: (tick, task robots, report)
 
     @property
     def t(self) -> float:
@@ -101,16 +114,24 @@ class WorldCore:
             self.agents.discard(rid)
             self.gone.add(rid)
 
-    def answered(self, rid: int, status_seq: int) -> None:
-        """An agent waited for answered this tick; its command announced ``status_seq``."""
+    def answered(self, rid: int, status_seq: int, idle: bool = False) -> None:
+        """An agent waited for answered this tick; its command announced ``status_seq``
+        and whether the robot is idle (CmdVel.idle)."""
         if status_seq >= 0:
             self.status_seq[rid] = status_seq
+        if idle:
+            self.idle.add(rid)
+        else:
+            self.idle.discard(rid)
 
     def on_ack(self, m: CoordAck) -> list:
         """Record the tasks a coordinator's ack announces (each robot's next Senses carry
-        its last one); returns the ack's spawns and removes (see :func:`ack_ops`)."""
+        its last one; a robot given a task is sensed at the next tick) and whether it asks
+        every robot for a Status; returns the ack's spawns and removes (:func:`ack_ops`)."""
         for rid, tid in zip(m.task_robots, m.task_ids):
             self.task_last[rid] = tid
+        if m.task_robots or m.report:
+            self._asks.append((m.tick, list(m.task_robots), bool(m.report)))
         return ack_ops(m)
 
     # ------------------------------------------------------------------ bodies
@@ -142,6 +163,7 @@ class WorldCore:
         self.roster.discard(rid)
         self.joins.pop(rid, None)
         self.status_seq.pop(rid, None)
+        self.idle.discard(rid)
         return True
 
     # ------------------------------------------------------------------ ticks
@@ -174,20 +196,36 @@ class WorldCore:
                barrier: bool) -> list[Sense]:
         """This tick's Sense per body whose agent takes part by now (a joiner from its join
         tick on); ``barrier``: the coordinator is in the barrier, so each Sense carries the
-        last task announced to its robot (else -1)."""
-        per = self.sensors.sense(pos, th).lists(ids)
-        out = []
-        t = self.t
-        for k, rid in enumerate(ids):
-            if self.joins.get(rid, -1) > self.tick:
-                continue  # its agent takes part from its join tick on
-            out.append(Sense(robot=rid, tick=self.tick, t=t, **per[k],
-                             task_id=self.task_last.get(rid, 0) if barrier else -1))
+        last task announced to its robot (else -1), and idle robots of the roster with
+        nothing new to sense get none (world/wake.py)."""
+        batch = self.sensors.sense(pos, th)
+        tick, t = self.tick, self.t
+        asks = [a for a in self._asks if a[0] < tick]
+        self._asks = [a for a in self._asks if a[0] >= tick]
+        report = any(a[2] for a in asks)
+        keep = None
+        if barrier and self.wake is not None:
+            # only roster members may be skipped: live twins and agents that have not
+            # answered yet are sensed every tick
+            told = {r for a in asks for r in a[1]}
+            keep = self.wake.due(tick // self.sense_every, ids, pos, th,
+                                 self.idle & self.roster, told)
+            if report:
+                keep[:] = True
+        rows = [k for k, rid in enumerate(ids)
+                if self.joins.get(rid, -1) <= tick and (keep is None or keep[k])]
+        per = batch.lists(ids, rows)
+        out = [Sense(robot=ids[k], tick=tick, t=t, **f,
+                     task_id=self.task_last.get(ids[k], 0) if barrier else -1, report=report)
+               for k, f in zip(rows, per)]
+        self.sensed = {s.robot for s in out}
         return out
 
     def expected(self) -> set[int]:
-        """The agents this tick waits for: the roster and the joiners due."""
-        return self.roster | {r for r, j in self.joins.items() if j <= self.tick}
+        """The agents this tick waits for: the roster and the joiners due, among the
+        robots sensed this tick."""
+        due = self.roster | {r for r, j in self.joins.items() if j <= self.tick}
+        return due & self.sensed
 
     def step(self, cmds: np.ndarray) -> None:
         """Step the physics dt with ``cmds`` (one row (vx, vy, wz) per body, in

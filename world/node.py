@@ -2,12 +2,15 @@
 
 Per tick k (sim time t = k * dt):
   * publishes Truth on world/truth and Clock on world/clock (DROP), Pose on robot/<id>/odom
-    every 1/pose_rate_hz (virtual robots only: the hwbridge reports live ones), and Sense on
-    robot/<id>/sense (BLOCK) to every body every 1/rate_hz;
+    every 1/pose_rate_hz (virtual robots only, and only those that moved since their last
+    one or not within [sensing] idle_keepalive_s: the hwbridge reports live ones), and Sense
+    on robot/<id>/sense (BLOCK) to every body every 1/rate_hz (in lockstep with the
+    coordinator in the barrier, an idle robot only when it or a robot near it moved, when
+    it is given a task or asked for a Status, and every idle_keepalive_s: world/wake.py);
   * then waits (lockstep) or sleeps (realtime), applies the latest commands and steps dt.
-Lockstep: tick k+1 runs once every *live* robot -- a virtual body whose agent's liveliness
-token alive/robot/<id> is present -- answered Sense(k) with CmdVel(tick=k) (tick -1 also
-counts), or after tick_timeout_s wall seconds (the missing ones are "late" and keep their
+Lockstep: tick k+1 runs once every *live* robot sent Sense(k) -- a virtual body whose
+agent's liveliness token alive/robot/<id> is present -- answered it with CmdVel(tick=k)
+(tick -1 also counts), or after tick_timeout_s wall seconds (the missing ones are "late" and keep their
 previous command until it is stale). Unanswered Sense messages are re-sent every
 min(0.25, tick_timeout_s/4) s while waiting, so a message lost at start-up does not cost a
 timeout. With nobody to wait for, ticks are paced at dt/rtf wall seconds (so the clock moves
@@ -60,6 +63,8 @@ from .core import SpawnRefused, WorldCore, join_ticks
 from .maps import WorldMap, build_map
 
 ABSURD_FACTOR = 10.0   # commands faster than this times the limit are dropped, not clamped
+ODOM_EPS_M = 1e-4      # a pose that moved less than this (m) ...
+ODOM_EPS_RAD = 1e-3    # ... and turned less than this (rad) is not published again at once
 JOIN_TIMEOUT_S = 30.0  # wall seconds a joining tick waits for a new agent's first command
 COORD_TIMEOUT_S = 60.0  # wall seconds a tick waits for the coordinator's ack
 
@@ -86,6 +91,7 @@ class WorldNode:
         self.pubs: dict[int, tuple] = {}       # rid -> (sense, odom) publishers
         self.pending: list = []                # Spawn / Remove messages, arrival order
         self.last_sense: dict[int, bytes] = {}
+        self.last_odom: dict[int, tuple] = {}  # rid -> (x, y, theta, sim t) last published
         self.gate = LockstepGate(w.tick_timeout_s)
         self.resend_s = min(0.25, w.tick_timeout_s / 4)
         self.last_send = 0.0
@@ -302,7 +308,7 @@ class WorldNode:
                 self.drops["late command"] += 1
             else:
                 if self.gate.answer(rid, m.tick) and rid in self.gate.expected:
-                    self.core.answered(rid, m.status_seq)
+                    self.core.answered(rid, m.status_seq, m.idle)
                 if self._t_answered is None and self.gate.all_answered():
                     self._t_answered = time.monotonic()
 
@@ -338,6 +344,7 @@ class WorldNode:
                 self.cmds.pop(m.robot, None)
                 self.twin_cmds.pop(m.robot, None)
                 self.last_sense.pop(m.robot, None)
+                self.last_odom.pop(m.robot, None)
                 self.gate.forget(m.robot)
                 self.log.info("removed robot %d (%s)", m.robot, m.reason or "no reason")
             else:
@@ -431,11 +438,7 @@ class WorldNode:
         self._clock_bytes = core.clock(self.cfg.world.mode, min(self.meter.rtf, 1e6)).encode()
         self._clock_pub.put(self._clock_bytes)
         if self.odom_every and self.tick % self.odom_every == 0:
-            for k, rid in enumerate(ids):
-                if not live[k]:
-                    self.pubs[rid][1].put(Pose(robot=rid, t=t, x=float(pos[k, 0]),
-                                               y=float(pos[k, 1]), theta=float(th[k]),
-                                               source="sim").encode())
+            self._publish_odom(ids, pos, th, live, t)
         expected: set[int] = set()
         if self.lockstep:
             self.has_agents = bool(core.roster or core.joins)
@@ -449,6 +452,24 @@ class WorldNode:
                 expected = {r for k, r in enumerate(ids) if not live[k] and r in core.agents}
         self.gate.open(self.tick, expected, now)
         self.last_send = now
+
+    def _publish_odom(self, ids, pos, th, live, t: float) -> None:
+        """Pose on robot/<id>/odom for virtual robots that moved since their last one (by
+        more than ODOM_EPS_M or ODOM_EPS_RAD), and for the others once every
+        [sensing] idle_keepalive_s: a swarm that holds still costs no 5 Hz odometry."""
+        every = self.cfg.sensing.idle_keepalive_s
+        last = self.last_odom
+        for k, rid in enumerate(ids):
+            if live[k]:
+                continue
+            x, y, a = float(pos[k, 0]), float(pos[k, 1]), float(th[k])
+            prev = last.get(rid)
+            if (prev is not None and t - prev[3] < every and abs(x - prev[0]) <= ODOM_EPS_M
+                    and abs(y - prev[1]) <= ODOM_EPS_M
+                    and abs(math.remainder(a - prev[2], math.tau)) <= ODOM_EPS_RAD):
+                continue
+            last[rid] = (x, y, a, t)
+            self.pubs[rid][1].put(Pose(robot=rid, t=t, x=x, y=y, theta=a, source="sim").encode())
 
     def _publish_sense(self, ids, pos, th) -> None:
         self.last_sense = {}

@@ -113,17 +113,19 @@ class SenseBatch:
         return dict(tgt=self.tgt[a:b], bearings=self.bearing[a:b], back=self.back[a:b],
                     touch=self.touch_bearing[c:d], touch_robot=self.touch_is_robot[c:d])
 
-    def lists(self, ids) -> list[dict]:
-        """Every robot's Sense fields as plain Python lists, robot k of ``ids`` at index k:
-        ids (the seen robots' ids), bearings, back_bearings (rad), touch (rad),
-        touch_robot. One ``tolist`` per array, then slices: what the world encodes."""
+    def lists(self, ids, rows=None) -> list[dict]:
+        """Robots' Sense fields as plain Python lists, for robot k of ``ids`` for each k in
+        ``rows`` (default: every robot, in order): ids (the seen robots' ids), bearings,
+        back_bearings (rad), touch (rad), touch_robot. One ``tolist`` per array, then
+        slices: what the world encodes."""
         tgt = np.asarray(ids, np.int64)[self.tgt].tolist()
         brg, back = self.bearing.tolist(), self.back.tolist()
         tb, tr = self.touch_bearing.tolist(), self.touch_is_robot.tolist()
         co, to = self.cam_off.tolist(), self.touch_off.tolist()
+        rows = range(len(ids)) if rows is None else rows
         return [dict(ids=tgt[co[k]:co[k + 1]], bearings=brg[co[k]:co[k + 1]],
                      back_bearings=back[co[k]:co[k + 1]], touch=tb[to[k]:to[k + 1]],
-                     touch_robot=tr[to[k]:to[k + 1]]) for k in range(len(ids))]
+                     touch_robot=tr[to[k]:to[k + 1]]) for k in rows]
 
 
 class Sensors:

@@ -16,7 +16,7 @@ an encoding Foxglove, Lichtblick and the ``mcap`` package's JSON/protobuf decode
     appears while it is still missing); the reply is written on its key like a put, with
     channel metadata ``{"zenoh": "query_reply"}``;
   * ``/swarmcover/scene`` (unless ``--no-scene``): ``foxglove.SceneUpdate`` (protobuf,
-    built with foxglove-sdk, see swarmcover/scene.py) at most ``--scene-hz`` (5) times a second
+    built with foxglove-sdk, see recording/scene.py) at most ``--scene-hz`` (5) times a second
     of recorded time and once at the end: walls, sources, robots, ids, mocap, Rips edges,
     frontier K, obstacle O, redundant robots, coverage. A Foxglove 3D panel draws it.
 
@@ -52,7 +52,7 @@ from mcap.writer import CompressionType, Writer
 from swarmcover.bus import messages as m
 from swarmcover.bus.keys import ROOT, message_for_key
 
-log = logging.getLogger("swarmcover.record")
+log = logging.getLogger("swarmcover.recording.record")
 
 MSG_ENCODING = "json"
 LEGACY_MSG_ENCODING = "msgpack"          # recordings before the JSON format
@@ -185,7 +185,7 @@ class McapSink:
         self._pending: dict[str, bytes] = {}
         self._pending_odom: dict[str, bytes] = {}
         if scene_hz > 0:
-            from swarmcover.scene import SceneState
+            from swarmcover.recording.scene import SceneState
             self._scene = SceneState()
 
     def _schema_id(self, tag: str | None) -> int:
@@ -286,7 +286,7 @@ class McapSink:
         self._apply_pending()
         if not st.ready:
             return False
-        from swarmcover.scene import SCENE_TOPIC, scene_schema
+        from swarmcover.recording.scene import SCENE_TOPIC, scene_schema
         if self._scene_cid is None:
             sch = scene_schema()
             sid = self._w.register_schema(sch.name, sch.encoding, sch.data)
@@ -532,7 +532,7 @@ def convert(src: str | os.PathLike, dst: str | os.PathLike, *, scene_hz: float =
             progress=None) -> dict:
     """Rewrite recording ``src`` (any format this package wrote) as ``dst`` in this format,
     with the scene channel; returns {"messages", "scenes"}. Payloads are kept exactly."""
-    from swarmcover.replay import read_messages, recording_metadata
+    from swarmcover.recording.replay import read_messages, recording_metadata
     if Path(src).resolve() == Path(dst).resolve():
         raise ValueError(f"--from {src} and -o {dst}: the same file; write to a new one")
     meta = recording_metadata(src)
@@ -571,7 +571,7 @@ def _args(p: argparse.ArgumentParser) -> None:
 def _prepare(args) -> int | None:
     """Flags checked before any connection; ``--from`` converts offline and ends here."""
     from swarmcover.bus.keys import check_swarm
-    from swarmcover.progress import Progress
+    from swarmcover.ground.progress import Progress
     args.scene_hz = 0.0 if args.no_scene else args.scene_hz
     if args.scene_hz < 0:
         raise ValueError(f"--scene-hz {args.scene_hz:g}: must be >= 0")
@@ -593,7 +593,7 @@ def _prepare(args) -> int | None:
 
 def _serve(args, session, keys, stop) -> int:
     from swarmcover.bus.node import ready
-    from swarmcover.progress import Progress
+    from swarmcover.ground.progress import Progress
     keyexpr = resolve_keyexpr(args.keyexpr, args.swarm)
     excludes = [resolve_keyexpr(x, args.swarm) for x in args.exclude]
     rec = None
@@ -626,7 +626,7 @@ def main(argv: list[str] | None = None) -> int:
     from swarmcover.bus.node import run_node
     # grace 0: the recorder bounds its own exit and must never be cut short mid-flush
     return run_node("swarmcover record", __doc__, _args, _serve, argv=argv,
-                    logger="swarmcover.record", before_session=_prepare, grace_s=0,
+                    logger="swarmcover.recording.record", before_session=_prepare, grace_s=0,
                     formatter_class=argparse.RawDescriptionHelpFormatter)
 
 if __name__ == "__main__":

@@ -35,11 +35,11 @@ from mcap.reader import make_reader
 from swarmcover.bus.keys import ROOT, check_swarm
 from mcap.decoder import DecoderFactory
 
-from swarmcover.record import (KIND_LIVELINESS, KIND_PUT, KIND_QUERY_REPLY, KIND_SCENE,
+from swarmcover.recording.record import (KIND_LIVELINESS, KIND_PUT, KIND_QUERY_REPLY, KIND_SCENE,
                                LEGACY_MSG_ENCODING, LIVELINESS_ENCODING, MSG_ENCODING,
                                json_to_payload)
 
-log = logging.getLogger("swarmcover.replay")
+log = logging.getLogger("swarmcover.recording.replay")
 
 
 @dataclass(frozen=True, slots=True)
@@ -301,7 +301,7 @@ class Replayer:
 
 def main(argv: list[str] | None = None) -> int:
     from swarmcover.bus.session import Shutdown, add_zenoh_args, open_session, setup_logging
-    from swarmcover.progress import Progress
+    from swarmcover.ground.progress import Progress
 
     p = argparse.ArgumentParser(prog="swarmcover replay", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -320,7 +320,7 @@ def main(argv: list[str] | None = None) -> int:
     add_zenoh_args(p)
     argv = list(sys.argv[1:] if argv is None else argv)
     args = p.parse_args(argv)
-    setup_logging(args.log_level, "swarmcover.replay")
+    setup_logging(args.log_level, "swarmcover.recording.replay")
     swarm_given = (any(a == "--swarm" or a.startswith("--swarm=") for a in argv)
                    or bool(os.environ.get("SWARMCOVER_SWARM")))
     target = args.to_swarm
