@@ -39,6 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from swarmcover.ground.angles import wrap
+
 # mirrors of the agent's and the world's defaults (tests/test_truth.py checks them)
 PRESS = math.radians(35.0)   # AgentParams.sweep_press_deg
 LOST = 0.03                  # AgentParams.sweep_lost_m
@@ -46,10 +48,6 @@ OPEN_TURNS = 3               # 45-deg turns round a wall's end that make an open
 BUDGET_RV = 2.0              # AgentParams.sweep_budget_rv, per phase
 SKIN = 0.015                 # [sensing] touch_skin
 STEP = 0.005                 # integration step (m)
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _unit(a: float) -> np.ndarray:
@@ -140,8 +138,8 @@ class Sweeper:
             v = c[k] - R
             body = math.atan2(v[1], v[0]) - self.heading
             centre = round(body / self.w) * self.w
-            a = _wrap(centre + self.heading)
-            if all(abs(_wrap(a - b)) > 1e-9 for b in out):
+            a = wrap(centre + self.heading)
+            if all(abs(wrap(a - b)) > 1e-9 for b in out):
                 out.append(a)
         return out
 
@@ -172,7 +170,7 @@ class Sweeper:
         half = math.pi / 2.0 - self.w / 2.0
         went = 0.0
         while self.depth_of(R) < self.depth and went < self.depth:
-            if self.robot_ahead(R, u) or any(abs(_wrap(c - n)) < half for c in self.sectors(R)):
+            if self.robot_ahead(R, u) or any(abs(wrap(c - n)) < half for c in self.sectors(R)):
                 break
             R = push_out(R + STEP * u, self.segs, self.r)
             went += STEP
@@ -182,7 +180,7 @@ class Sweeper:
         """Sweep from R0, where the first drive touched a wall in world direction
         ``touch_dir`` (its touch sector's centre is the first normal)."""
         body = touch_dir - self.heading
-        n = _wrap(round(body / self.w) * self.w + self.heading)
+        n = wrap(round(body / self.w) * self.w + self.heading)
         R = np.asarray(R0, float).copy()
         hi = lo = self.frac(R)
         # phase 1 keeps the wall on the hand that moves it towards Q
@@ -222,7 +220,7 @@ class Sweeper:
                 R = push_out(R + STEP * d, self.segs, self.r)
                 travelled += STEP
                 total += STEP
-                felt = {round(math.degrees(-h * _wrap(c - n))): c for c in self.sectors(R)}
+                felt = {round(math.degrees(-h * wrap(c - n))): c for c in self.sectors(R)}
                 felt = {a: c for a, c in felt.items() if -45 <= a <= 90}
                 if felt:
                     lost = 0.0
@@ -235,6 +233,6 @@ class Sweeper:
                     if lost >= LOST - 1e-9:
                         if turned == 0:
                             n0 = n                 # the wall whose end it goes round
-                        n = _wrap(n + h * self.w)  # the wall ended: round its end
+                        n = wrap(n + h * self.w)  # the wall ended: round its end
                         turned, lost = turned + 1, 0.0
         return SweepResult("swept", R, hi, lo, False, total)  # pragma: no cover
