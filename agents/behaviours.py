@@ -17,6 +17,7 @@ Modes (:class:`~agents.modes.Mode`) and the Status.state (:class:`State`) they r
 * ``record`` (snapshot), ``keep`` (station keeping)                    -> "holding"
 * ``home`` (visual homing to task bearings)   -> "moving" (goto), "deploying", "test_driving"
 * ``open`` / ``open_back`` (open-loop along a direction)   -> "deploying" / "test_driving"
+* ``sweep`` (sliding along the wall a test drive touched)               -> "test_driving"
 * ``scale_out`` / ``scale_back`` (scale correction)                    -> "deploying"
 
 Task kinds (what the coordinator sends, what Status says) are documented on
@@ -35,6 +36,7 @@ from .modes import MOVING_MODES, Context, Home, Idle, Mode, ModeState, Outcome, 
 from .openloop import Leg, Open, ScaleOut
 from .params import AgentParams
 from .perception import Contact, Perception
+from .sweep import Sweep
 
 __all__ = ["Behaviour", "Command", "Mode", "MOVING_MODES", "Phase", "STOP", "State", "TaskState"]
 
@@ -101,6 +103,7 @@ class Behaviour:
         self.return_goal: dict[int, float] | None = None  # test drive: re-home after reversing
         self.return_reason = "touch"    # test drive: the failure reason once back home
         self.touch_offset = 0.0         # test drive: touch sector centre - direction driven (rad)
+        self.press = False              # this tick's velocity presses into walls (a sweep)
         self.target: dict[int, float] = {}  # holding: the snapshot kept (rad, its frame)
 
     @property
@@ -152,6 +155,8 @@ class Behaviour:
           that blocks the motion: the contact is kept (pinned) in Status, the robot homes
           back to ``bearings`` (or reverses open loop if none are given) and the task
           fails with reason "touch" (or "touch (return: <why>)" if the return failed).
+          With ``sweep_side`` a touch starts a wall sweep (:mod:`agents.sweep`): done
+          "opening" / "room" where it stands, or back home failing "swept HI LO".
         * ``leave``: stop; task done at once; state idle, vertex -1.
 
         After any task ends (done or failed) the robot holds station where it is (state
@@ -186,8 +191,9 @@ class Behaviour:
                 and task.kind not in ("hold", "leave") and self.see.t - self.t0 > task.timeout_s):
             self._finish(TaskState.FAILED, self._fail_reason("timeout"))
         self.intent = None
+        self.press = False
         ux, uy = self._tick()
-        self.cmd = self._output(ux, uy)
+        self.cmd = self._output(ux, uy, self.press)
         return self.cmd
 
     # ================================================================== status
@@ -234,12 +240,14 @@ class Behaviour:
             self.reason = reason
             self.changed = True
 
-    def _output(self, ux: float, uy: float) -> Command:
-        """The command for a body-frame velocity (m/s): slid along walls, clamped to v_max,
-        and for a diffdrive robot turned into forward speed and turn rate."""
+    def _output(self, ux: float, uy: float, press: bool = False) -> Command:
+        """The command for a body-frame velocity (m/s): slid along walls (``press``: not,
+        a sweep presses into them), clamped to v_max, and for a diffdrive robot turned into
+        forward speed and turn rate."""
         p = self.p
-        if ux or uy:
+        if (ux or uy) and not press:
             ux, uy = slide(ux, uy, self.see.obst, p.tau)
+        if ux or uy:
             ux, uy = clamp_speed(ux, uy, p.v_max)
         if not (ux or uy):
             return STOP
@@ -277,6 +285,7 @@ class Behaviour:
         match r.outcome:
             case Outcome.RUNNING:
                 self.intent = r.intent
+                self.press = not r.slide
                 return r.ux, r.uy
             case Outcome.SWITCH:
                 self._mode = r.next
@@ -319,6 +328,8 @@ class Behaviour:
             case Outcome.WALL:       # far enough out: stay against the wall as the vertex
                 self.touch.pinned = True
                 self._finish(TaskState.DONE, "wall")
+            case Outcome.SWEPT:      # the wall swept, no opening: back to the vertex
+                self._sweep_back(mode, r.reason)
             case Outcome.DONE:
                 self._finish(TaskState.DONE, r.reason)
             case Outcome.GAVE_UP:
@@ -441,15 +452,30 @@ class Behaviour:
             self._finish(TaskState.DONE)
 
     def _test_touch(self, out: Open) -> None:
-        """Test drive hit an obstacle: keep the contact, go back, fail with "touch"."""
+        """Test drive hit an obstacle: keep the contact, go back, fail with "touch" (or,
+        with Task.sweep_side, sweep the wall from there)."""
         self.touch.pinned = True
         self.changed = True
+        if self.task.sweep_side and self.task.sweep_landmarks:
+            self._mode = Sweep.after(out, self.task, self.touch_offset, self.ctx)
+            return
         # first reverse what was driven (always possible: open loop), then re-home on the
         # vertex's bearings if any; a landmark lost during the drive cannot strand us
         travelled = out.travelled(self.see)
         self.return_goal = self._task_goal(self.task)
         self._enter_open(wrap(out.leg.direction + PI), max(0.0, travelled), out.leg.speed,
                          Phase.RETURN)
+
+    def _sweep_back(self, sweep: Sweep, reason: str) -> None:
+        """A sweep found no opening: home back to the vertex (open loop towards where it
+        believes it lies first, with fewer than two of its landmarks in view) and fail with
+        ``reason``."""
+        self.return_reason, goal = reason, self._task_goal(self.task)
+        if sum(1 for l in goal if l in self.see.seen) >= min(2, len(goal)) or sweep.R is None:
+            return self._home_back(goal)
+        self.return_goal = goal
+        self._enter_open(math.atan2(-sweep.R[1], -sweep.R[0]), math.hypot(*sweep.R),
+                         self.p.test_drive_speed_frac * self.p.v_max, Phase.RETURN)
 
     def _via_failed(self, why: str) -> None:
         """A probe's approach to its point on the edge failed: home back to the vertex and

@@ -35,9 +35,11 @@ class Mode(StrEnum):
     OPEN_BACK = "open_back"    # back along it after a touch or a lost link
     SCALE_OUT = "scale_out"    # rv scale measurement: out until a neighbour is lost
     SCALE_BACK = "scale_back"  # and back until it is seen again
+    SWEEP = "sweep"            # sliding along a wall a test drive touched (agents.sweep)
 
 
-MOVING_MODES = frozenset({Mode.HOME, Mode.OPEN, Mode.OPEN_BACK, Mode.SCALE_OUT, Mode.SCALE_BACK})
+MOVING_MODES = frozenset({Mode.HOME, Mode.OPEN, Mode.OPEN_BACK, Mode.SCALE_OUT, Mode.SCALE_BACK,
+                          Mode.SWEEP})
 
 
 class Phase(StrEnum):
@@ -62,6 +64,7 @@ class Outcome(StrEnum):
     BLOCKED = "blocked"    # open: walls kept the motion below 10% for blocked_s
     TOUCH = "touch"        # open (test leg): a touch blocks the direction (``Tick.offset``)
     WALL = "wall"          # open (test leg): the touch came past keep_after: stay there
+    SWEPT = "swept"        # sweep: no opening found; ``reason`` says what it joined
     DONE = "done"          # the task is done, with ``reason``
     GAVE_UP = "gave_up"    # the task failed, with ``reason``
 
@@ -71,8 +74,10 @@ class Tick:
     """One mode tick's result. ``ux``, ``uy``: body-frame velocity (m/s) before wall
     sliding and clamping; ``intent``: the body-frame direction (rad) it means, for dead
     reckoning (None: none); ``progress``: the task's progress in [0, 1], or None to leave it;
-    ``outcome``, with ``reason`` (DONE, GAVE_UP, FAILED), ``next`` (SWITCH, HELD) and
-    ``offset`` (TOUCH: touch sector centre - direction driven, rad)."""
+    ``outcome``, with ``reason`` (DONE, GAVE_UP, FAILED, SWEPT), ``next`` (SWITCH, HELD)
+    and ``offset`` (TOUCH: touch sector centre - direction driven, rad); ``slide``: False
+    for a velocity meant to press into the walls it touches (a sweep), not slid along
+    them."""
     ux: float = 0.0
     uy: float = 0.0
     intent: float | None = None
@@ -81,6 +86,7 @@ class Tick:
     reason: str = ""
     next: ModeState | None = None
     offset: float = 0.0
+    slide: bool = True
 
 
 def drive(speed: float, d: float, progress: float | None = None) -> Tick:

@@ -61,6 +61,14 @@ class AgentParams:
     stall_s: float = 4.0             # homing whose largest bearing error has not dropped by
     stall_deg: float = 0.5           # stall_deg within stall_s has stalled (wall, crowd)
     contact_clear_rv: float = 0.1    # a sticky contact clears after moving this far (x rv)
+    # wall sweep (a test drive with Task.sweep_side; agents/sweep.py)
+    sweep_press_deg: float = 35.0    # slide along the wall this far into it: more than the
+                                     # touch sectors' half width (180 / n_touch), so the
+                                     # wall is pressed wherever its normal lies in the sector
+    sweep_lost_m: float = 0.03       # no wall felt on the pressed side for this far while
+                                     # sweeping: the wall ended, turn one touch sector round
+                                     # its end (135 deg of such turns: an opening)
+    sweep_budget_rv: float = 2.0     # each half of a sweep gives up after this far (x rv)
     # differential drive (spec 4.8)
     k_w: float = 1.5                 # 1/s
     k_v: float = 1.0
@@ -91,6 +99,11 @@ class AgentParams:
         return math.radians(self.hold_gate_deg)
 
     @property
+    def press(self) -> float:
+        """sweep_press_deg in rad."""
+        return math.radians(self.sweep_press_deg)
+
+    @property
     def aligned(self) -> bool:
         """Whether to estimate frame rotation from mutual bearings (rotating robots)."""
         return self.align == "on" or (self.align == "auto" and self.kind == "diffdrive")
@@ -106,7 +119,8 @@ _POSITIVE = {"v_max", "w_max", "rv", "dt", "g0", "arrive_deg", "lost_timeout_s",
              "hold_deadband_deg", "hold_second_deg", "hold_gate_deg", "deploy_speed_frac", "test_drive_speed_frac",
              "scale_speed_frac", "scale_step_rv", "scale_max_rv", "blocked_s",
              "stall_s", "stall_deg",
-             "contact_clear_rv", "k_w", "k_v", "error_alpha"}
+             "contact_clear_rv", "k_w", "k_v", "error_alpha", "sweep_press_deg",
+             "sweep_lost_m", "sweep_budget_rv"}
 
 
 # the section of the run config each field is read from
@@ -150,6 +164,8 @@ def check(p: AgentParams, where: str = "params") -> AgentParams:
         raise _err(where, "align", p.align, "not one of auto, on, off")
     if p.error_alpha > 1:
         raise _err(where, "error_alpha", p.error_alpha, "must be <= 1")
+    if p.sweep_press_deg >= 90:
+        raise _err(where, "sweep_press_deg", p.sweep_press_deg, "must be < 90")
     for name in ("n_touch", "arrive_ticks", "hold_window", "link_lost_ticks", "settle_ticks",
                  "status_every"):
         if getattr(p, name) < 1:

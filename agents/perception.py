@@ -18,7 +18,7 @@ from .control import FrameTracker, circmean, unit, wrap
 class Perception:
     """One robot's view of the world, refreshed by :meth:`update` once per Sense tick."""
 
-    __slots__ = ("robot", "n", "t", "tick", "dt", "seen", "back", "obst", "last_seen",
+    __slots__ = ("robot", "n", "t", "tick", "dt", "seen", "back", "obst", "bump", "last_seen",
                  "last_seen_t", "bumped_t", "heading", "advance")
 
     def __init__(self, robot: int, dt: float):
@@ -30,6 +30,7 @@ class Perception:
         self.seen: dict[int, float] = {}   # neighbour id -> bearing (rad, body frame)
         self.back: dict[int, float] = {}   # neighbour id -> its bearing of us (rad, its frame)
         self.obst: list[float] = []        # obstacle (not robot) touch sectors (rad, body)
+        self.bump: list[float] = []        # touch sectors another robot is in (rad, body)
         self.last_seen: dict[int, int] = {}      # neighbour id -> tick index last seen
         self.last_seen_t: dict[int, float] = {}  # neighbour id -> Sense.t last seen (s)
         self.bumped_t = -1e18        # last time another robot touched us (s)
@@ -73,7 +74,8 @@ class Perception:
             self.last_seen[i] = n
             self.last_seen_t[i] = t
         self.obst = [a for a, r in zip(s.touch, s.touch_robot) if not r]
-        if any(s.touch_robot):
+        self.bump = [a for a, r in zip(s.touch, s.touch_robot) if r]
+        if self.bump:
             self.bumped_t = s.t
         return dt
 

@@ -72,8 +72,9 @@ def grow(seed: int, idx: int, **kw):
 
 def khop_zone(k):
     """A closure_zone replacement: edges outside z_raw with both ends within k hops of an
-    odd vertex (k None: every edge outside z_raw)."""
-    def zone(cx, z_raw):
+    odd vertex (k None: every edge outside z_raw). ``folds_only`` (certify's narrow first
+    zone) is ignored: every variant is one zone."""
+    def zone(cx, z_raw, folds_only=False):
         if not z_raw.any():
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         odd = (np.bincount(cx.edges[z_raw].ravel(), minlength=cx.n) & 1).astype(bool)

@@ -15,7 +15,11 @@ along the deployment bearing; if its disk (radius r) touches a wall within wall_
 leaves it at the wall as a new robot (touch flag and contact bearing), a clear drive places
 a new robot at d0. A probe (kind "probe", when the fence offers it) first moves
 ``via_frac`` along its edge toward the other end, then drives ``depth_rv`` rv along its
-bearing, with the same outcomes (coordinator.topology.fence's Deployment docstring). Drive outcomes
+bearing, with the same outcomes (coordinator.topology.fence's Deployment docstring). A wall
+sweep (a probe with ``sweep_far``, the default rule for candidate sides) drives its bearing;
+a touch starts the sweep of bench/sweep.py (the agent's rule, on true positions), which
+comes home with the part of the edge it joined ("swept") or leaves a new robot where it
+went round a wall's end ("opening") or its wall receded ("room"). Drive outcomes
 go back to the fence through ``coordinator.topology.evidence`` when the project has it (else as
 ``test_drive_failures``). The loop runs until the fence has no deployment left, or a robot
 cap; with no frontier edge either that is a fixed point. The claim is then the deployer's
@@ -329,12 +333,43 @@ class Outcome:
     new_robot: int | None = None
     deployment: object = None
     contact_offset: float = 0.0
+    swept: tuple[float, float] | None = None
 
 
-def execute(sw: Swarm, dep) -> Outcome:
+def execute_sweep(sw: Swarm, dep, depth: float) -> Outcome:
+    """A wall sweep (``dep.sweep_far`` > 0; bench/sweep.py): the end's drive along
+    ``dep.bearing`` up to ``depth`` (m); clear: a new robot there ('clear'); a touch: the
+    sweep, which ends 'swept' (the robot home, ``swept`` = (hi, lo)), or with a new robot
+    where it stopped: 'opening' (it drove into an opening) or 'room' (its wall receded
+    beyond the depth limit)."""
+    from bench.sweep import Sweeper
+    i = int(dep.vertex)
+    a, b = dep.edge
+    j = b if a == i else a
+    p = sw.pos[i]
+    d = float(dep.bearing)
+    trav, end, cdir = sw.drive(p, sw.world(i, d), depth)
+    if cdir is None:
+        return Outcome(i, d, dep.kind, "clear", trav, sw.add(end), dep)
+    others = np.array([q for k, q in enumerate(sw.pos) if k != i]).reshape(-1, 2)
+    side = 1 if float(dep.offset) > 0 else -1
+    sp = Sweeper(sw.segs, others, p, sw.pos[j], side, r=RADIUS, heading=sw.heading[i],
+                 depth=depth, n_touch=N_TOUCH, rv=RV)
+    res = sp.run(end, cdir, float(dep.sweep_far), float(dep.sweep_stop))
+    if res.kind == "swept":
+        return Outcome(i, d, dep.kind, "swept", trav + res.travelled, None, dep,
+                       swept=(res.hi, res.lo))
+    c = sp.sectors(res.pos)
+    return Outcome(i, d, dep.kind, "opening" if res.opening else "room",
+                   trav + res.travelled, sw.add(res.pos, contact=c[0] if c else None), dep)
+
+
+def execute(sw: Swarm, dep, sweep_depth: float = 0.75 * RV) -> Outcome:
     """Carry out one fence deployment geometrically (see the module docstring)."""
     i = int(dep.vertex)
     kind = getattr(dep, "kind", "edge")
+    if float(getattr(dep, "sweep_far", 0.0) or 0.0) > 0.0:
+        return execute_sweep(sw, dep, sweep_depth)
     p = sw.pos[i]
     wdir = sw.world(i, float(dep.bearing))
     if kind == "probe":
@@ -387,6 +422,8 @@ class Feedback:
         if self._ev is not None:
             if o.result == "unreached":
                 self._ev.record_unreached(o.deployment)
+            elif o.result == "swept":
+                self._ev.record(o.deployment, touched=True, swept=o.swept)
             else:
                 self._ev.record(o.deployment, touched=(o.result == "touch"),
                                 contact_offset=o.contact_offset)
@@ -439,7 +476,7 @@ def run_map(case: MapCase, *, per_cycle: int = 8, cap: int | None = None,
             v = min(fence.deployments)
             deps = [fence.deployments[v][0]]
         for dep in deps:
-            o = execute(sw, dep)
+            o = execute(sw, dep, P.sweep_depth)
             fb.record(o)
             placed[o.result] += 1
             if o.new_robot is not None:
@@ -509,6 +546,7 @@ def run_map(case: MapCase, *, per_cycle: int = 8, cap: int | None = None,
         "complex_ok": sys_edges == o_edges and sys_tris == o_tris,
         "algebra_ok": bool(chain_ok and own_z == bool(cert.certified)),
         "fence_z_boundary": bool(own_fz), "livelock": livelock, "api": fb.api, "grow_cpu_s": round(grow_s, 3),
+        "inferred": dict(Counter(s.reason for fe in fence.edges for s in fe.sides if s.inferred)),
     }
 
 

@@ -527,6 +527,8 @@ class Status(Message):
     touch_offset: a test drive that failed with "touch": the angle (rad, CCW) from the
       direction driven to the centre of the touch sector that stopped it; the wall's normal
       lies within tau of that centre (coordinator.topology.evidence). 0 otherwise.
+    reason of a wall sweep (a test_drive with ``sweep_side``) that found no opening:
+      "swept HI LO" (:func:`sweep_reason`), the robot back at its vertex.
     """
     robot: int = f_int(0)
     seq: int = f_int(0)
@@ -555,6 +557,32 @@ class Status(Message):
 TASK_KINDS = ("hold", "goto", "deploy", "test_drive", "leave")
 
 
+def sweep_reason(hi: float, lo: float) -> str:
+    """Status.reason of a wall sweep that found no opening: "swept HI LO", the fractions of
+    the edge (from the robot's vertex towards the other end) between which its body slid
+    along the wall, going round no wall's end; LO "end" when it crossed the ray at its vertex
+    (Task.sweep_stop). The task fails with it once the robot is back at its vertex (with
+    " (return: why)" after it when it could not get back)."""
+    low = "end" if lo == -math.inf else f"{lo:.3f}"
+    return f"swept {hi:.3f} {low}"
+
+
+def parse_sweep_reason(reason: str) -> tuple[float, float] | None:
+    """(hi, lo) of a :func:`sweep_reason` (lo -inf for "end"), or None if ``reason`` is not
+    one (extra words after it, like a failed return, are ignored)."""
+    parts = reason.split()
+    if len(parts) < 3 or parts[0] != "swept":
+        return None
+    try:
+        hi = float(parts[1])
+        lo = -math.inf if parts[2] == "end" else float(parts[2])
+    except ValueError:
+        return None
+    if not math.isfinite(hi) or math.isnan(lo) or lo == math.inf:
+        return None
+    return hi, lo
+
+
 @message("Task", same_len=(("landmarks", "bearings"), ("via_landmarks", "via_bearings")))
 class Task(Message):
     """Coordinator -> agent: what to do next. A new task replaces the current one.
@@ -578,6 +606,21 @@ class Task(Message):
       bearing for ``via_distance`` (m) instead. Then it drives along ``direction``. A touch
       on the way out sends it back to ``bearings`` as usual; an approach that fails sends it
       back and fails with reason "via (<why>)".
+    sweep_* (test_drive only; ``sweep_side`` 0, the default, = none): a WALL SWEEP of the
+      fence edge from this robot's vertex to the other end (coordinator.topology.evidence).
+      On a touch the robot slides along the wall, pressing into it, towards the other end
+      until it crosses the edge's perpendicular at fraction ``sweep_far``, then back past
+      its vertex until it crosses the ray from its vertex ``sweep_stop`` (rad) beyond the
+      edge's perpendicular there; then it homes back to ``bearings`` and fails with reason
+      "swept HI LO" (:func:`sweep_reason`). It stays where it is, done with reason
+      "opening", when it went round the end of a wall (agents.sweep), and with "room" when
+      its wall recedes more than ``sweep_depth`` (m) from the edge; no touch at all is
+      done as any test drive. ``sweep_edge``: direction (rad, reference frame) from the
+      vertex to the other end; ``sweep_side``: +1 when the side swept is counter-clockwise
+      of it, -1 clockwise. The robot finds where it is from the bearings of
+      ``sweep_landmarks`` (robot ids, a subset of ``landmarks``, the other end first),
+      standing at ``sweep_points`` (x, y per landmark, m, reference frame, the vertex at
+      the origin).
     """
     task_id: int = f_int(0)
     robot: int = f_int(0)
@@ -596,10 +639,19 @@ class Task(Message):
     via_landmarks: list = f_ints(0, optional=True)
     via_bearings: list = f_floats(**ANGLE, optional=True)
     via_distance: float = f_float(0.0, 1e4, optional=True)
+    sweep_side: int = f_int(-1, 1, optional=True)
+    sweep_edge: float = f_float(**ANGLE, optional=True)
+    sweep_far: float = f_float(0.0, 2.0, optional=True)
+    sweep_stop: float = f_float(0.0, PI, optional=True)
+    sweep_depth: float = f_float(0.0, 1e4, optional=True)
+    sweep_landmarks: list = f_ints(0, optional=True)
+    sweep_points: list = f_floats(-1e4, 1e4, optional=True)
 
     def _post_check(self):
         if self.ref_offsets and len(self.ref_offsets) != len(self.landmarks):
             raise WireError(self.TAG, "ref_offsets", "must be [] or one per landmark")
+        if len(self.sweep_points) != 2 * len(self.sweep_landmarks):
+            raise WireError(self.TAG, "sweep_points", "must be two (x, y) per sweep landmark")
 
 
 @message("Complex", same_len=(("inferred", "inferred_why"),))

@@ -82,6 +82,16 @@ class CoordinatorConfig:
                                    # whose touch sector is not its line's own, or whose side's
                                    # end rests on a wall that oblique, is driven again along
                                    # that wall's normal: 0.52 rv doors at any wall angle
+    sweep: bool = True             # a fence side its ends would close (no room at either end)
+                                   # closes once both ends swept the wall in front of it: each
+                                   # drives into its wall and slides along it, pressing into
+                                   # it, past the edge's middle and back past its own end to
+                                   # the next side's perpendicular; going round the end of a
+                                   # wall on the way is an opening the robot stays in
+                                   # (coordinator.topology.evidence). Every opening in that
+                                   # wall at least 2 x radius + 0.06 m wide is found (0.18 m
+                                   # with the default body and [agent] sweep_*), whatever its
+                                   # width in rv. false: door_min_rv's probe lines
     free_probes: bool = True       # frontier robots off every push probe their sides in the
                                    # same cycle without a path, and come back home whatever
                                    # they found (a clear one is no evidence; a push takes that
@@ -104,7 +114,7 @@ class CoordinatorConfig:
         return TopologyParams(rv=self.rv, eps=self.eps_rv * self.rv,
                               beta=math.radians(self.beta_deg), n_touch=self.n_touch,
                               w_obstacle=self.w_obstacle, d_td=self.d_td_rv * self.rv,
-                              redundancy_period=self.redundancy_period)
+                              redundancy_period=self.redundancy_period, sweep=self.sweep)
 
     @classmethod
     def from_section(cls, section: dict | None, rv: float, where: str = "config") -> "CoordinatorConfig":

@@ -50,6 +50,7 @@ class Step:
     started_t: float = 0.0
     n_landmarks: int = -1         # landmarks of the goto/hold task it was started with
     touch_offset: float = 0.0     # failed test drive: touch sector centre - direction (rad)
+    timeout_s: float = 0.0        # the task's own timeout (s), when longer than the config's
 
 
 @dataclass

@@ -51,7 +51,11 @@ class JobSpec:
     A probe (kind "probe", coordinator.topology.evidence) first homes to the point at ``via_frac``
     of the frontier edge from f (``via_landmarks`` / ``via_bearings``, f's occupant's frame;
     empty for an end probe), then drives ``direction`` (perpendicular to the edge) for
-    ``distance``; it is never moved onto a lattice point.
+    ``distance``; it is never moved onto a lattice point. A wall sweep (``sweep_far`` > 0,
+    the Deployment's) drives ``direction`` from f and on a touch sweeps the wall:
+    ``sweep_side`` is the side swept seen from f (+1 CCW of f -> q), ``sweep_edge`` the
+    bearing of q from f, ``sweep_points`` vertex -> (x, y) where f's neighbours stand in
+    f's frame with |fq| = 1 (:func:`coordinator.topology.targets.star_shape`).
     """
     path: list[int]
     direction: float
@@ -70,6 +74,11 @@ class JobSpec:
     deployment: object = None      # the coordinator.topology.fence.Deployment driven (for Evidence)
     free: bool = False             # a probe off every path (path [f], nobody refills f):
                                    # it ends back at f whatever it found
+    sweep_far: float = 0.0         # wall sweep (see above): 0 = none
+    sweep_stop: float = 0.0
+    sweep_side: int = 0
+    sweep_edge: float = 0.0
+    sweep_points: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -304,7 +313,7 @@ def _claimed(cx, paths) -> set[int]:
 def _job_spec(snap: Snapshot, params: TopologyParams, pth, vid: int, test_drive: bool,
               scale_correct: bool) -> JobSpec:
     """The push along ``pth`` (a paths.PushPath) deploying to new vertex ``vid``."""
-    from .topology.targets import frontier_desired_bearings, probe_via_bearings
+    from .topology.targets import frontier_desired_bearings, probe_via_bearings, star_shape
 
     dep = pth.deployment
     f = pth.frontier
@@ -322,6 +331,12 @@ def _job_spec(snap: Snapshot, params: TopologyParams, pth, vid: int, test_drive:
         spec.test_drive = True
         spec.distance = dep.depth_rv * params.rv if dep.depth_rv > 0 else None
         spec.via_frac = float(dep.via_frac)
+        if dep.sweep_far > 0 and dep.edge is not None:
+            q = dep.edge[1] if dep.edge[0] == f else dep.edge[0]
+            spec.sweep_far, spec.sweep_stop = float(dep.sweep_far), float(dep.sweep_stop)
+            spec.sweep_side = int(dep.sigma) if dep.edge[0] == f else -int(dep.sigma)
+            spec.sweep_edge = float(snap.nbrs.get(f, {}).get(q, 0.0))
+            spec.sweep_points = star_shape(snap.nbrs, f, q)
         if dep.via_frac > 0 and dep.edge is not None:
             q = dep.edge[1] if dep.edge[0] == f else dep.edge[0]
             nf = snap.nbrs.get(f, {})

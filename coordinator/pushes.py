@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import logging
 
-from swarmcover.bus.messages import Status, Task
+from swarmcover.bus.messages import Status, Task, parse_sweep_reason
 
 from .actions import Outbox
 from .config import CoordinatorConfig, PushMode
@@ -147,7 +147,10 @@ class Pushes:
         dep = job.step(N.DEPLOY)
         if td is not None:
             if td.state == S.PENDING:
-                self.start(td, self.tasks.test_drive(spec), now)
+                # a wall sweep homes on robots that stay put: not on other pushes' paths
+                others = {v for j in self.jobs if j is not job and not j.aborted
+                          for v in (*j.spec.path, j.spec.new_vertex)}
+                self.start(td, self.tasks.test_drive(spec, others), now)
                 return
             if td.state == S.RUNNING:
                 return
@@ -304,12 +307,13 @@ class Pushes:
         s.task_id = self.out.send(s.robot, task)
         s.state = S.RUNNING
         s.started_t = now
+        s.timeout_s = task.timeout_s
 
     def _check_timeout(self, s: Step, now: float) -> None:
         r = self.roster.get(s.robot)
         if r is None or r.dead:
             s.state, s.reason = S.FAILED, "robot died"
-        elif now - s.started_t > self.cfg.task_timeout_s + 10.0:
+        elif now - s.started_t > max(self.cfg.task_timeout_s, s.timeout_s) + 10.0:
             s.state, s.reason = S.FAILED, "no report from the agent"
 
     def _step_done(self, job: PushJob, s: Step) -> None:
@@ -348,28 +352,32 @@ class Pushes:
             log.info("cycle %d: probe from vertex %d at %.2f of %s did not reach the edge "
                      "(%s, %d times)", self.cycle, spec.path[-1], spec.via_frac,
                      spec.frontier_edge, td.reason, n)
-        if td.reason.startswith("touch"):
+        swept = parse_sweep_reason(td.reason)
+        if td.reason.startswith("touch") or swept is not None:
             # the direction driven is what failed: the fence blocks deployments near it. The
             # contact was felt where the robot touched, up to wall_keep_rv out, not at the
             # vertex (a door jamb felt "above" is ahead and to the side): on_status keeps it
-            # in td_contacts, never as a wall the robot at the vertex rests against
-            self._record(spec, touched=True, contact_offset=td.touch_offset)
-            log.info("cycle %d: test drive from vertex %d touched an obstacle: fence side "
-                     "of %s -> O", self.cycle, spec.path[-1], spec.frontier_edge)
-            if td.reason == "touch" and self._retry(job):
+            # in td_contacts, never as a wall the robot at the vertex rests against. A wall
+            # sweep ("swept HI LO") also books the part of the edge it joined
+            self._record(spec, touched=True, contact_offset=td.touch_offset, swept=swept)
+            log.info("cycle %d: test drive from vertex %d touched an obstacle (%s): fence "
+                     "side of %s", self.cycle, spec.path[-1], td.reason, spec.frontier_edge)
+            if "(return" not in td.reason and self._retry(job):
                 return
         job.cancel("test drive touched an obstacle")
 
-    def _record(self, spec, touched: bool, contact_offset: float = 0.0) -> None:
+    def _record(self, spec, touched: bool, contact_offset: float = 0.0,
+                swept: tuple[float, float] | None = None) -> None:
         """Book a drive's outcome (coordinator.topology.evidence): the direction actually
-        driven, and for a touch the agent's touch_offset (sector centre - direction)."""
+        driven, for a touch the agent's touch_offset (sector centre - direction), for a
+        wall sweep the (hi, lo) it joined."""
         dep = spec.deployment
         if dep is None:
             if touched:
                 self.evidence.add_failed_direction(spec.path[-1], float(spec.direction))
             return
         self.evidence.record(dep, touched, direction=float(spec.direction),
-                             contact_offset=contact_offset)
+                             contact_offset=contact_offset, swept=swept)
 
     def _retry(self, job: PushJob) -> bool:
         """Re-plan a push whose test drive touched, within this cycle (spec 3.4(iv): the

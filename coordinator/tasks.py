@@ -119,7 +119,9 @@ class TaskBuilder:
         return Task(kind="goto", vertex=v, landmarks=lm, bearings=br,
                     ref_offsets=self.chained_offsets(v, lm), timeout_s=self.cfg.task_timeout_s)
 
-    def test_drive(self, spec: JobSpec) -> Task:
+    def test_drive(self, spec: JobSpec, moving: set[int] = frozenset()) -> Task:
+        """The test drive at f (a probe's approach first; a wall sweep's fields when
+        ``spec.sweep_far``, its landmarks off the ``moving`` vertices)."""
         f = spec.path[-1]
         lm, br = self.vertex_landmarks(f, exclude=set())
         task = Task(kind="test_drive", vertex=f, landmarks=lm, bearings=br,
@@ -142,7 +144,35 @@ class TaskBuilder:
                     task.via_landmarks.append(r)
                     task.via_bearings.append(b)
             task.via_distance = spec.via_frac * self.cfg.d0
+        if spec.sweep_far > 0:
+            self._sweep_fields(task, spec, moving)
         return task
+
+    def _sweep_fields(self, task: Task, spec: JobSpec, moving: set[int]) -> None:
+        """A wall sweep's fields (bus.messages.Task): its landmarks are the live robots of
+        the vertices whose place in f's frame the bearings fix (``spec.sweep_points``) and
+        that no other push moves, the other end first, at d0 metres per edge length (the
+        coordinator's estimate of it: only the depth limit depends on it, the lines a sweep
+        ends on are ratios). Twice the task timeout: the sweep's two halves may each take
+        up to the agent's sweep_budget_rv."""
+        occ = self.snap.occupant
+        q = spec.frontier_edge[1] if spec.frontier_edge[0] == spec.path[-1] else spec.frontier_edge[0]
+        order = [q] + sorted(v for v in spec.sweep_points if v != q)
+        for v in order:
+            r = occ.get(v)
+            if r is not None and v not in moving and self.roster.live(r):
+                x, y = spec.sweep_points[v]
+                task.sweep_landmarks.append(r)
+                task.sweep_points += [x * self.cfg.d0, y * self.cfg.d0]
+        if not task.sweep_landmarks or task.sweep_landmarks[0] != occ.get(q):
+            task.sweep_landmarks, task.sweep_points = [], []
+            return                         # no other end in view: a plain test drive
+        task.sweep_side = 1 if spec.sweep_side > 0 else -1
+        task.sweep_edge = spec.sweep_edge
+        task.sweep_far = spec.sweep_far
+        task.sweep_stop = spec.sweep_stop
+        task.sweep_depth = spec.distance if spec.distance is not None else self.params.d_td
+        task.timeout_s = 2.0 * self.cfg.task_timeout_s
 
     def deploy(self, spec: JobSpec, moving: set[int]) -> Task:
         """Frontier robot to the new position (spec 4.4): homing on the static landmarks of

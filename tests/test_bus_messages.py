@@ -65,6 +65,9 @@ def messages(draw, cls):
         vals["pose"] = vals["pose"][:3] if len(vals["pose"]) >= 3 else []
     if cls is Task and vals["ref_offsets"]:
         vals["ref_offsets"] = [0.5] * len(vals["landmarks"])
+    if cls is Task:
+        vals["sweep_points"] = (vals["sweep_points"] * 2)[: 2 * len(vals["sweep_landmarks"])]
+        vals["sweep_landmarks"] = vals["sweep_landmarks"][: len(vals["sweep_points"]) // 2]
     if cls is Complex:
         vals["occupants"] = vals["occupants"][: len(vals["vertices"])]
         vals["vertices"] = vals["vertices"][: len(vals["occupants"])]

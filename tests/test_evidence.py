@@ -23,6 +23,9 @@ from swarmcover.coordinator.planner import Snapshot, plan_cycle
 from swarmcover.coordinator.topology.targets import probe_via_bearings
 
 DEG = math.pi / 180
+# the probe rule (perpendicular and tilted probe lines): dangling edges' sides, and every
+# candidate side with [coordinator] sweep = false; tests/test_sweep.py has the wall sweeps
+PROBES = TopologyParams(sweep=False)
 
 
 def _reports(P, touch=None):
@@ -104,13 +107,13 @@ def test_a_probe_that_touched_an_oblique_wall_is_driven_again_along_its_normal()
     cx = build_complex(rep)
     e = int(cx.edge_index(0, 1))
     ev = Evidence()
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     first = {d.via_frac: d for d in _probes(f) if d.vertex == 0}
     assert set(first) == {0.25, 0.5, 0.75} and not _tilted(f)
     for frac, d in first.items():
         # the middle one felt a wall 45 deg off its line; the others nearly head-on
         ev.record(d, touched=True, contact_offset=(45 if frac == 0.5 else 2) * DEG)
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     todo = _probes(f)
     assert todo and all(d.tilt == pytest.approx(45 * DEG) for d in todo)
     assert {d.vertex for d in todo} == {0, 1} and {probe_key(d.vertex, d.edge, d.sigma, d.via_frac)[3] for d in todo} == {0.5}
@@ -122,10 +125,10 @@ def test_a_probe_that_touched_an_oblique_wall_is_driven_again_along_its_normal()
     # the tilted drive found room: the side never closes on evidence
     ev2 = copy.deepcopy(ev)
     ev2.record(todo[0], touched=False)
-    assert _open_or_inferred_clear(detect_fence(cx, **ev2.fence_kwargs()), e)
+    assert _open_or_inferred_clear(detect_fence(cx, PROBES, **ev2.fence_kwargs()), e)
     # it touched too: closed on evidence
     ev.record(todo[0], touched=True, contact_offset=0.0)
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     assert e in f.obstacle.tolist() and f.by_index[e].sides[0].why == "probes" and not f.inferred
 
 
@@ -138,16 +141,16 @@ def test_ends_resting_on_an_oblique_wall_tilt_every_probe_along_its_normal():
     e = int(cx.edge_index(0, 1))
     ev = Evidence()
     for _ in range(3):
-        f = detect_fence(cx, **ev.fence_kwargs())
+        f = detect_fence(cx, PROBES, **ev.fence_kwargs())
         for d in [d for d in _probes(f) if d.tilt == 0.0]:
             ev.record(d, touched=True, contact_offset=0.0)
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     todo = _probes(f)
     assert {round(d.via_frac if d.vertex == 0 else 1 - d.via_frac, 3) for d in todo} == {0.25, 0.5, 0.75}
     assert all(d.tilt == pytest.approx(45 * DEG, abs=1e-6) for d in todo)
     for d in todo:
         ev.record(d, touched=True, contact_offset=0.0)
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     assert e in f.obstacle.tolist() and f.by_index[e].sides[0].why == "probes"
 
 
@@ -170,7 +173,7 @@ def _run_probes(cx, P, hits, ev, rounds=10):
     one is clear; returns (fence, clear probes)."""
     clear = []
     for _ in range(rounds):
-        f = detect_fence(cx, **ev.fence_kwargs())
+        f = detect_fence(cx, PROBES, **ev.fence_kwargs())
         todo = _probes(f)
         if not todo or clear:
             return f, clear
@@ -182,7 +185,7 @@ def _run_probes(cx, P, hits, ev, rounds=10):
             ev.record(d, touched)
             if not touched:
                 clear.append(d)
-    return detect_fence(cx, **ev.fence_kwargs()), clear
+    return detect_fence(cx, PROBES, **ev.fence_kwargs()), clear
 
 
 def _open_or_inferred_clear(f, e) -> bool:
@@ -197,7 +200,7 @@ def _open_or_inferred_clear(f, e) -> bool:
 def test_both_touch_across_a_door_does_not_close_it_before_a_probe_through_the_middle():
     P, rep, hits = _door_pair(0.8)
     cx = build_complex(rep)
-    f = detect_fence(cx)
+    f = detect_fence(cx, PROBES)
     e = int(cx.edge_index(0, 1))
     side = f.by_index[e].sides[0]
     # both contacts point straight into the open side: once this closed the door
@@ -220,17 +223,17 @@ def test_a_side_closes_only_after_all_its_probes_touched():
     s = 0.9
     P = np.array([[0.0, 0.0], [s, 0.0], [s / 2, s * math.sqrt(3) / 2]])
     cx = build_complex(_reports(P))
-    f0 = detect_fence(cx)
+    f0 = detect_fence(cx, PROBES)
     e = int(cx.edge_index(0, 1))
     # the ends' 60-deg drives and the reflex second probes below 0-1 touched
     ev = Evidence()
     for _ in range(2):
-        f = detect_fence(cx, **ev.fence_kwargs())
+        f = detect_fence(cx, PROBES, **ev.fence_kwargs())
         for v in (0, 1):
             for d in f.deployments[v]:
                 if d.edge == (0, 1) and d.kind == "edge":
                     ev.record(d, touched=True)
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     assert f.by_index[e].sides[0].reason == "probing"
     todo = [d for d in _probes(f) if d.edge == (0, 1)]
     keys = {probe_key(d.vertex, d.edge, d.sigma, d.via_frac) for d in todo if d.via_frac > 0}
@@ -239,17 +242,17 @@ def test_a_side_closes_only_after_all_its_probes_touched():
     for d in todo:
         if d.via_frac != 0.5:
             ev.record(d, touched=True)
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     assert e in f.frontier.tolist() and not f.obstacle.size
     left = [d for d in _probes(f) if d.edge == (0, 1)]
     assert left and all(d.via_frac == 0.5 for d in left)
     assert {d.vertex for d in left} == {0, 1}               # either end may drive it
     # it was clear (room there): the side never closes on evidence
     ev.record(left[0], touched=False)
-    assert _open_or_inferred_clear(detect_fence(cx, **ev.fence_kwargs()), e)
+    assert _open_or_inferred_clear(detect_fence(cx, PROBES, **ev.fence_kwargs()), e)
     # it touched: now the side closes, on evidence
     ev.record(left[0], touched=True)
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     assert e in f.obstacle.tolist() and f.by_index[e].sides[0].why == "probes"
     assert f0.by_index[e].sides[0].reason == "open"
 
@@ -259,11 +262,11 @@ def test_interior_probes_of_one_robot_in_one_direction_do_not_block_each_other()
     P = np.array([[0.0, 0.0], [s, 0.0], [s / 2, -s * math.sqrt(3) / 2]])
     cx = build_complex(_reports(P, touch={0: 90 * DEG, 1: 90 * DEG}))
     ev = Evidence()
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     at0 = [d for d in f.deployments[0] if d.kind == "probe"]
     first = min(at0, key=lambda d: d.via_frac)
     ev.record(first, touched=True)
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     fr = sorted(d.via_frac for d in f.deployments[0] if d.kind == "probe")
     assert first.via_frac not in fr and len(fr) == len(at0) - 1
 
@@ -277,7 +280,7 @@ def test_an_unreached_probe_is_tried_from_the_other_end_then_closes_only_as_infe
     cx = build_complex(rep)
     e = int(cx.edge_index(0, 1))
     ev = Evidence()
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     mid = [d for d in _probes(f) if abs(probe_key(d.vertex, d.edge, d.sigma, d.via_frac)[3] - 0.5) < 1e-9]
     assert {d.vertex for d in mid} == {0, 1}
     for d in _probes(f):
@@ -286,20 +289,20 @@ def test_an_unreached_probe_is_tried_from_the_other_end_then_closes_only_as_infe
     from0 = next(d for d in mid if d.vertex == 0)
     for _ in range(Evidence.UNREACHED_LIMIT):
         ev.record_unreached(from0)
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     left = _probes(f)
     assert [(d.vertex, d.via_frac) for d in left] == [(1, 0.5)]     # the other end now
     assert e in f.frontier.tolist() and not f.obstacle.size
     for _ in range(Evidence.UNREACHED_LIMIT):
         ev.record_unreached(left[0])
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     # unreached from both ends: nothing left to try; closed only as an inference, reported
     assert not _probes(f) and e in f.obstacle.tolist()
     assert f.by_index[e].sides[0].why == "probe_unreachable"
     assert (e, "probe_unreachable") in [(int(a), w) for a, w in f.inferred]
     # a probe that does reach and touch is evidence again: the side closes on probes
     ev.record(left[0], touched=True)
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     assert e in f.obstacle.tolist() and f.by_index[e].sides[0].why == "probes" and not f.inferred
 
 
@@ -310,17 +313,17 @@ def test_a_clear_probe_is_done_and_never_offered_again():
     cx = build_complex(rep)        # the clear probe's robot is not added: no triangle
     e = int(cx.edge_index(0, 1))
     ev = Evidence()
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     n0 = len({probe_key(d.vertex, d.edge, d.sigma, d.via_frac) for d in _probes(f)})
     mid = next(d for d in _probes(f) if d.via_frac == 0.5)
     ev.record(mid, touched=False)
     assert probe_key(mid.vertex, mid.edge, mid.sigma, mid.via_frac) in ev.clear_probes()
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     keys = {probe_key(d.vertex, d.edge, d.sigma, d.via_frac) for d in _probes(f)}
     assert len(keys) == n0 - 1 and all(k[3] != 0.5 for k in keys)
     for d in _probes(f):
         ev.record(d, touched=True)
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     # every probe done, one found room, the side still one-sided: not closed on evidence
     # (its robot explores beyond; the side closes only as the reported inference
     # 'probe_clear'), and nothing is offered again
@@ -346,7 +349,7 @@ def test_a_lone_robot_tries_six_directions_before_it_gives_up():
     cx = build_complex({0: {"neighbours": {}}})
     ev = Evidence()
     for touches in range(7):
-        f = detect_fence(cx, default_bearing=0.3, **ev.fence_kwargs())
+        f = detect_fence(cx, PROBES, default_bearing=0.3, **ev.fence_kwargs())
         deps = f.deployments.get(0, ())
         if touches < 6:
             assert deps and {d.kind for d in deps} == {"isolated"}, touches
@@ -376,7 +379,7 @@ def test_a_single_file_end_tries_every_direction_of_its_open_wedge():
     ev.merge_failures({1: [math.pi - 60 * DEG, -math.pi + 60 * DEG, 90 * DEG, -90 * DEG]})
     seen = []
     for _ in range(30):
-        f = detect_fence(cx, **ev.fence_kwargs())
+        f = detect_fence(cx, PROBES, **ev.fence_kwargs())
         deps = [d for d in f.deployments.get(0, ())]
         if not deps:
             break
@@ -389,7 +392,7 @@ def test_a_single_file_end_tries_every_direction_of_its_open_wedge():
     assert "single_file" in kinds
     sf = sorted(a for k, a in seen if k == "single_file")
     assert sf == [120, 120, 180]
-    assert not detect_fence(cx, **ev.fence_kwargs()).deployments.get(0)
+    assert not detect_fence(cx, PROBES, **ev.fence_kwargs()).deployments.get(0)
 
 
 def test_a_clear_probe_with_the_rest_unreached_closes_only_as_inferred():
@@ -402,7 +405,7 @@ def test_a_clear_probe_with_the_rest_unreached_closes_only_as_inferred():
     cx = build_complex(rep)
     e = int(cx.edge_index(0, 1))
     ev = Evidence()
-    probes = _probes(detect_fence(cx, **ev.fence_kwargs()))
+    probes = _probes(detect_fence(cx, PROBES, **ev.fence_kwargs()))
     fracs = sorted({probe_key(d.vertex, d.edge, d.sigma, d.via_frac)[3] for d in probes})
     assert len(fracs) >= 2
     for d in probes:
@@ -412,11 +415,11 @@ def test_a_clear_probe_with_the_rest_unreached_closes_only_as_inferred():
         else:
             for _ in range(Evidence.UNREACHED_LIMIT):
                 ev.record_unreached(d)                  # its approach clips from this end
-    f = detect_fence(cx, **ev.fence_kwargs())
+    f = detect_fence(cx, PROBES, **ev.fence_kwargs())
     assert not _probes(f) and e in f.obstacle.tolist()
     assert f.by_index[e].sides[0].why == "probe_unreachable"
     assert (e, "probe_unreachable") in [(int(a), w) for a, w in f.inferred]
-    f = detect_fence(cx, TopologyParams(clear_infers=False), **ev.fence_kwargs())
+    f = detect_fence(cx, TopologyParams(clear_infers=False, sweep=False), **ev.fence_kwargs())
     assert e in f.frontier.tolist() and not f.obstacle.size and not _probes(f)
     assert f.by_index[e].sides[0].why == "probing"
     assert not any(d.edge == (0, 1) for lst in f.deployments.values() for d in lst)

@@ -23,6 +23,9 @@ from swarmcover.coordinator.topology.params import TopologyParams
 from swarmcover.coordinator.planner import Snapshot, plan_cycle, replan_push
 
 DEG = math.pi / 180
+# the probe rule's free probes (interior probe lines; [coordinator] sweep = false);
+# tests/test_sweep.py has free wall sweeps
+PROBES = TopologyParams(d_td=0.9, sweep=False)
 
 # robots 0 and 1 rest on a wall (y = 0.07) with a 0.8 m door between them, apex 2 below
 # them, source 3 below the apex (it sees the apex only), vertex 4 beside the source
@@ -46,7 +49,7 @@ def _plan(snap, **kw):
                 protected=set(), max_paths=1, scale_correct=False, test_drive=True,
                 next_vertex=10)
     args.update(kw)
-    return plan_cycle(snap, TopologyParams(d_td=0.9), **args)
+    return plan_cycle(snap, PROBES, **args)
 
 
 def _key(spec):
@@ -58,7 +61,7 @@ def _door_fence(ev):
     rep = {v: {"neighbours": nb, "touch": v in (0, 1), "touch_bearing": 90 * DEG}
            for v, nb in ((v, _nbrs(DOOR[:3], v)) for v in range(3))}
     cx = build_complex(rep)
-    return cx, detect_fence(cx, **ev.fence_kwargs())
+    return cx, detect_fence(cx, PROBES, **ev.fence_kwargs())
 
 
 def test_a_returned_probe_is_no_evidence_and_keeps_its_side_open():
@@ -72,7 +75,7 @@ def test_a_returned_probe_is_no_evidence_and_keeps_its_side_open():
     assert ev.returned_probes() == {k} and not ev.clear_probes() and not ev.failed_probes()
     assert set(ev.fence_kwargs()) == {"test_drive_failures", "probe_failures", "probe_clear",
                                       "probe_unreachable", "probe_fracs", "probe_offsets",
-                                      "tilt_failures"}
+                                      "tilt_failures", "sweeps", "sweep_tries"}
     # every other probe touches: the side stays frontier, the returned one still offered
     # (a recorded CLEAR probe would now close it as the inference 'probe_clear')
     for d in probes:
@@ -125,14 +128,15 @@ def test_a_returned_probe_is_never_offered_free_again_but_paths_still_may_take_i
     # a free probe's retry skips them; any other re-planned push may take them
     kw = dict(start=0, busy=[], exclude={1, 2, 3, 4}, test_drive_failures={}, new_vertex=10,
               scale_correct=False, test_drive=True)
-    any_push = replan_push(snap, TopologyParams(d_td=0.9), **kw)
-    free_retry = replan_push(snap, TopologyParams(d_td=0.9), skip_probes=frozenset(keys), **kw)
+    any_push = replan_push(snap, PROBES, **kw)
+    free_retry = replan_push(snap, PROBES, skip_probes=frozenset(keys), **kw)
     assert any_push.kind == "probe" and _key(any_push) in keys
     assert free_retry is None or free_retry.kind != "probe"
 
 
-def _deployer(snap):
-    dep = Deployer(CoordinatorConfig(), sources=[90 * DEG])
+def _deployer(snap, cfg=CoordinatorConfig(sweep=False)):
+    """A deployer that holds ``snap``: every occupant a live robot holding its vertex."""
+    dep = Deployer(cfg, sources=[90 * DEG])
     dep.snapshot = snap
     seq = iter(range(1, 10_000))
     for v, rid in snap.occupant.items():

@@ -647,8 +647,11 @@ def campaign_case(seed, drop_fence_edge=False):
     pos = P[cx.index(cx.ids)]
     from swarmcover.coordinator.topology.evidence import Evidence
     ev = Evidence(door_min_rv=0.4, robot_radius_rv=0.06)
+    # the probe rule's straight-line drives (_drives emulates no wall sweep): the campaign
+    # tests the certificate on the end states they reach
+    probes = TopologyParams(sweep=False)
     for _ in range(12):
-        fence = detect_fence(cx, **ev.fence_kwargs())
+        fence = detect_fence(cx, probes, **ev.fence_kwargs())
         if not _drives(cx, pos, segs, fence, ev):
             break
     cert = certify(cx, fence)

@@ -22,8 +22,9 @@ def _fence(P, **kw):
 
 def _probed(cx, params=None, **kw):
     """detect_fence after every probe it asks for has been driven and touched (a wall
-    everywhere in front of every side the ends would close): the fence a run reaches when
-    the ends' evidence was right. ``kw``: test_drive_failures and other detect_fence keywords."""
+    everywhere in front of every side the ends would close; a wall sweep joins all it was
+    asked to): the fence a run reaches when the ends' evidence was right. ``kw``:
+    test_drive_failures and other detect_fence keywords."""
     ev = Evidence()
     ev.merge_failures(kw.pop("test_drive_failures", None) or {})
     for _ in range(20):
@@ -32,7 +33,7 @@ def _probed(cx, params=None, **kw):
         if not probes:
             return f
         for d in probes:
-            ev.record(d, touched=True)
+            ev.record(d, touched=True, swept=(d.sweep_far, -math.inf) if d.sweep_far else None)
     raise AssertionError("probes never ran out")
 
 

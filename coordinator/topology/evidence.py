@@ -44,6 +44,35 @@ with via_frac 0 (a perpendicular drive from an end) counts as a failed direction
 vertex, like any drive. Interior probes are keyed by (edge, side, fraction): probes of
 different fractions driven by one robot in one direction do not stand in for each other.
 
+Wall sweeps (amendment 2026-11-27, TopologyParams.sweep, the default). Probe lines at any
+spacing leave openings between them, and a door straddling an edge's end beside neither
+edge's lines (bench/truth.py seed 0 maps 70 and 381, seed 1 five more: 0.30 rv doors that
+a 0.12 rv robot drives through). So each END of a candidate side drives its own "no
+room" direction into the wall, and on the touch slides along the wall, pressing into it
+(the contact's touch sector gives its normal within tau), first towards the other end
+until it crosses the edge's perpendicular at fraction ``far`` (1/2 + sweep_overlap / 2),
+then back past its own end until it crosses the ray there ``stop`` beyond the end's
+perpendicular (the neighbouring fence side's perpendicular, so the wall in front of the
+vertex between the two sides is swept too). It tracks both lines bearing-only (its
+position from the bearings of the robots around its vertex, whose shape the triangles'
+angles give; between fixes by dead reckoning that never runs ahead of it). It keeps the
+wall on one hand and turns with it: into concave corners, and round the end of a wall it
+loses (one touch sector per agents' sweep_lost_m without a touch). Going round a wall's end
+by 135 deg or more since its last turn into a wall is an OPENING at least a body wide (a
+narrower gap stops the body on its far side: a turn into a wall); the robot stays there as
+a new robot (like a clear probe: its own deployments explore what lies beyond), and so
+does one whose wall recedes beyond TopologyParams.sweep_depth. A jagged or bending wall, a
+niche, a box's corner turn it back as far as forward, or less. Measured in the world's own
+physics and touch sensors (tests/test_agent_sweep.py; robot radius r = 0.06 m, touch skin
+0.015 m, the agent's defaults): every door at least 0.18 m = 2 r + 0.06 m wide in a 0.1 m
+wall was found at every wall angle tried (0-45 deg in 7.5 deg steps, two noise seeds);
+bench/sweep.py's emulation finds every one at least 0.17 m. A sweep reports the part of
+the edge it joined: from its end's ray (-inf in that end's fractions) or the fraction
+where it stopped short, to the farthest fraction it reached. The side closes on evidence
+once the joined intervals of its two ends cover the whole line of fractions (-inf, +inf):
+the wall in front of it, from the ray at one end to the ray at the other, was followed by
+a robot's body that went round no wall's end.
+
 Keys are node ids of the complex (the deployer's vertex ids, or a harness's point ids).
 """
 from __future__ import annotations
@@ -52,14 +81,19 @@ import math
 from dataclasses import dataclass
 from typing import Container, Mapping
 
-__all__ = ["ProbeKey", "DriveRecord", "Evidence", "probe_fractions", "probe_depth_rv",
-           "probe_key", "needs_tilt", "tilted_door_rv", "TILT_MATCH"]
+__all__ = ["ProbeKey", "SideKey", "DriveRecord", "Evidence", "probe_fractions",
+           "probe_depth_rv", "probe_key", "needs_tilt", "tilted_door_rv", "TILT_MATCH",
+           "sweep_interval", "sweep_gaps"]
 
 # (u, v, sigma, frac): edge u < v (node ids), canonical open side sigma (coordinator.topology.fence's
 # convention: +1 is counter-clockwise from v as seen by u), fraction measured from u.
 ProbeKey = tuple[int, int, int, float]
 
+# (u, v, sigma): a side (edge u < v, canonical open side sigma)
+SideKey = tuple[int, int, int]
+
 _FRAC_DIGITS = 3
+INF = math.inf
 
 # A tilted probe that touched stands for any needed tilt within this (rad) of its own: the
 # same direction, up to the bearing noise in the edge's perpendicular.
@@ -126,13 +160,41 @@ def probe_key(vertex: int, edge: tuple[int, int], sigma: int, via_frac: float) -
     return (u, v, int(sigma), round(f, _FRAC_DIGITS))
 
 
+def sweep_interval(vertex: int, edge: tuple[int, int], hi: float, lo: float
+                   ) -> tuple[float, float]:
+    """The part of edge (u, v) (u < v) a sweep from ``vertex`` joined, in fractions from u:
+    ``hi`` is the farthest fraction (from ``vertex``) it reached towards the other end,
+    ``lo`` where it stopped on its way back (-inf: it crossed the ray at its own end).
+    The ray at u is -inf, the ray at v +inf."""
+    u, v = int(edge[0]), int(edge[1])
+    a, b = float(lo), float(hi)
+    if int(vertex) == u:
+        return (a, b)
+    return (1.0 - b, 1.0 - a)
+
+
+def sweep_gaps(intervals) -> list[tuple[float, float]]:
+    """The parts of (-inf, +inf) that no interval (lo, hi) covers, in order (intervals that
+    touch or overlap join)."""
+    gaps: list[tuple[float, float]] = []
+    cur = -INF
+    for lo, hi in sorted((float(a), float(b)) for a, b in intervals):
+        if lo > cur:
+            gaps.append((cur, lo))
+        cur = max(cur, hi)
+    if cur < INF:
+        gaps.append((cur, INF))
+    return gaps
+
+
 @dataclass(frozen=True)
 class DriveRecord:
     """One drive's outcome. vertex: the node it was driven from. direction: the direction
     driven (rad, that robot's body frame; the perpendicular or tilted leg for a probe).
     kind: Deployment.kind. via_frac: fraction of the approach leg (probes; 0 otherwise).
     tilt: Deployment.tilt (rad; 0 for a perpendicular probe). contact_offset: a touch's
-    sector centre minus ``direction`` (rad; 0 when clear)."""
+    sector centre minus ``direction`` (rad; 0 when clear). swept: a sweep's (hi, lo)
+    (:func:`sweep_interval`), None for other drives or a sweep that found room."""
 
     vertex: int
     direction: float
@@ -143,6 +205,7 @@ class DriveRecord:
     touched: bool
     tilt: float = 0.0
     contact_offset: float = 0.0
+    swept: tuple[float, float] | None = None
 
 
 class Evidence:
@@ -168,10 +231,15 @@ class Evidence:
         self._returned: set[ProbeKey] = set()
         # (probe key, end it was driven from) -> approach legs that failed from that end
         self._approach_fails: dict[tuple[ProbeKey, int], int] = {}
+        # wall sweeps: side -> joined intervals (fractions from u, rays -inf / +inf), and
+        # probe key (fraction 0 or 1: the end) -> sweeps driven from that end
+        self._swept: dict[SideKey, list[tuple[float, float]]] = {}
+        self._sweep_tries: dict[ProbeKey, int] = {}
 
     # ---------------------------------------------------------------- recording
     def record(self, dep, touched: bool, *, direction: float | None = None,
-               returned: bool = False, contact_offset: float = 0.0) -> DriveRecord:
+               returned: bool = False, contact_offset: float = 0.0,
+               swept: tuple[float, float] | None = None) -> DriveRecord:
         """Record the outcome of driving ``dep`` (a coordinator.topology.fence.Deployment, or anything
         with its fields). ``direction`` overrides dep.bearing (the direction actually driven,
         e.g. after lattice placement). ``touched``: the drive failed with a touch before it
@@ -182,14 +250,21 @@ class Evidence:
         key goes to :meth:`returned_probes` only and the side stays open.
         ``contact_offset``: for a touch, the touch sector's centre minus the direction driven
         (rad; the agent's Status.touch_offset): a perpendicular interior probe whose offset
-        :func:`needs_tilt` is then offered again, tilted along that centre."""
+        :func:`needs_tilt` is then offered again, tilted along that centre.
+        ``swept``: a wall sweep's (hi, lo) (fractions from its vertex, lo -inf for its
+        end's ray; :func:`sweep_interval`) when it touched and swept; a sweep that found
+        room or an opening is a clear drive (``touched`` False, its robot stays)."""
         d = float(dep.bearing if direction is None else direction)
         frac = float(getattr(dep, "via_frac", 0.0) or 0.0)
         edge = tuple(int(x) for x in dep.edge) if dep.edge is not None else None
         tilt = float(getattr(dep, "tilt", 0.0) or 0.0)
         rec = DriveRecord(int(dep.vertex), d, str(dep.kind), edge, int(dep.sigma), frac,
-                          bool(touched), tilt, float(contact_offset) if touched else 0.0)
+                          bool(touched), tilt, float(contact_offset) if touched else 0.0,
+                          (float(swept[0]), float(swept[1])) if swept is not None else None)
         self.records.append(rec)
+        if float(getattr(dep, "sweep_far", 0.0) or 0.0) > 0.0 and edge is not None:
+            self._record_sweep(rec, returned)
+            return rec
         interior = rec.kind == "probe" and edge is not None and frac > 1e-9
         if touched:
             if interior:
@@ -224,6 +299,21 @@ class Evidence:
         return self._approach_fails[k]
 
     UNREACHED_LIMIT = 2
+
+    def _record_sweep(self, rec: DriveRecord, returned: bool) -> None:
+        """A wall sweep's outcome: its end's try, the interval it joined, or room found."""
+        key = probe_key(rec.vertex, rec.edge, rec.sigma, 0.0)
+        self._sweep_tries[key] = self._sweep_tries.get(key, 0) + 1
+        if rec.touched:
+            self.add_failed_direction(rec.vertex, rec.direction)
+            if rec.swept is not None:
+                u, v = rec.edge
+                self._swept.setdefault((u, v, rec.sigma), []).append(
+                    sweep_interval(rec.vertex, rec.edge, *rec.swept))
+        elif returned:
+            self._returned.add(key)
+        else:
+            self._clear.add(key)
 
     def add_failed_direction(self, vertex: int, direction: float) -> None:
         """A drive from ``vertex`` along ``direction`` touched (no Deployment at hand)."""
@@ -275,17 +365,32 @@ class Evidence:
                          if n >= self.UNREACHED_LIMIT
                          and (present is None or (k[0] in present and k[1] in present)))
 
+    def sweeps(self, present: Container[int] | None = None
+               ) -> dict[SideKey, tuple[tuple[float, float], ...]]:
+        """side (u, v, sigma) -> the intervals its wall sweeps joined (fractions from u, the
+        rays at u and v -inf and +inf): detect_fence's ``sweeps``."""
+        return {k: tuple(iv) for k, iv in self._swept.items()
+                if present is None or (k[0] in present and k[1] in present)}
+
+    def sweep_tries(self, present: Container[int] | None = None) -> dict[ProbeKey, int]:
+        """(u, v, sigma, end fraction 0 or 1) -> sweeps driven from that end (whatever they
+        found): detect_fence's ``sweep_tries``."""
+        return {k: n for k, n in self._sweep_tries.items()
+                if present is None or (k[0] in present and k[1] in present)}
+
     def fence_kwargs(self, present: Container[int] | None = None) -> dict:
         """Keyword arguments for detect_fence: test_drive_failures, probe_failures,
-        probe_offsets, tilt_failures, probe_clear, probe_unreachable and probe_fracs
-        (restricted to nodes in ``present`` when given)."""
+        probe_offsets, tilt_failures, probe_clear, probe_unreachable, probe_fracs, sweeps
+        and sweep_tries (restricted to nodes in ``present`` when given)."""
         return dict(test_drive_failures=self.failed_directions(present),
                     probe_failures=self.failed_probes(present),
                     probe_offsets=self.probe_offsets(present),
                     tilt_failures=self.tilt_failures(present),
                     probe_clear=self.clear_probes(present),
                     probe_unreachable=self.unreachable_probes(present),
-                    probe_fracs=self.fractions)
+                    probe_fracs=self.fractions,
+                    sweeps=self.sweeps(present),
+                    sweep_tries=self.sweep_tries(present))
 
     def merge_failures(self, failures: Mapping[int, list[float]]) -> None:
         """Adopt failed directions kept elsewhere (e.g. a restarted coordinator)."""

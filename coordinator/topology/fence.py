@@ -104,11 +104,17 @@ def detect_fence(
     probe_clear=(),
     probe_offsets=None,
     tilt_failures=(),
+    sweeps=None,
+    sweep_tries=None,
 ) -> Fence:
     """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
 
     How a side closes (spec 3.4 with the amendment of 2026-11, "evidence before a side
-    closes"). The ends' rules only make a side a CANDIDATE:
+    closes"; with ``TopologyParams.sweep``, the default, a candidate side of an edge with a
+    triangle closes on WALL SWEEPS from both ends instead of the probes below: once the
+    intervals ``sweeps`` joined cover it, as coordinator.topology.evidence says, each end
+    offering a sweep until its tries are used up, then the inference 'sweep_gap' or, an end
+    having found room, 'probe_clear'). The ends' rules only make a side a CANDIDATE:
       * test-drive rule: both ends have no room on it -- each end's deployment into it lies
         within 30 deg of a failed drive of that robot, or within 90 deg of the wall contact
         it rests against; an end whose open wedge on that side is reflex (> 210 deg) also
@@ -170,6 +176,10 @@ def detect_fence(
       wall contact of either end that points into the open side. So every wall the side's
       robots have felt is probed along (within tau of) its normal, where an oblique door
       is widest (coordinator.topology.evidence).
+    sweeps: (u, v, sigma) -> intervals (lo, hi) of the side the wall sweeps of its ends
+      joined, in fractions from u, the ray at u -inf and the ray at v +inf
+      (evidence.sweep_interval).
+    sweep_tries: (u, v, sigma, 0.0 or 1.0: the end u or v) -> sweeps driven from that end.
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
       e.g. edges reclassified after a failed test drive in an earlier cycle.
     default_bearing: first deployment direction (rad, body frame) of a robot with no
@@ -188,10 +198,10 @@ def detect_fence(
     ends = test_drive_rule(cx, open_sides, room, ends)
     marks = corner_wait_marks(corner_wait, marks, room)
     ev = probe_evidence(probe_failures, probe_fracs, probe_unreachable, probe_clear,
-                        probe_offsets, tilt_failures)
+                        probe_offsets, tilt_failures, sweeps, sweep_tries)
     if P.corner_probes:
         marks, ends = corner_candidates(marks, ends, open_sides)
-    probing, marks = plan_probes(cx, L, P, room, ev, ends, marks)
+    probing, marks = plan_probes(cx, L, P, room, ev, ends, marks, open_sides)
     marks = forced_marks(cx, forced_obstacle, marks)
     fence_edges, K, O, z, deps = resolve_sides(cx, L, open_sides, marks, probing, room)
     deployments = robot_deployments(cx, L, room, deps, default_bearing)

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 from swarmcover.ground.angles import wrap
 from .complex import Complex
-from .evidence import TILT_MATCH, needs_tilt, probe_depth_rv, probe_fractions
+from .evidence import TILT_MATCH, needs_tilt, probe_depth_rv, probe_fractions, sweep_gaps
 from .fence_local import _Local
 from .fence_sides import Marks, Room, Sides
 from .fence_types import Deployment
@@ -72,7 +72,10 @@ class ProbeEvidence:
     fracs: fractions of the edge where probes go. failed: keys of interior probes that
     touched. offsets: key -> touch sector centre minus the direction driven (rad).
     tilt_failed: key -> tilts (rad) of its tilted probes that touched. clear: keys of
-    probes that found room. unreached: (key, end node id) given up from that end.
+    probes that found room (a sweep's: fraction 0 or 1, its end). unreached: (key, end
+    node id) given up from that end. sweeps: (u, v, sigma) -> intervals its wall sweeps
+    joined (fractions from u, rays -inf / +inf). sweep_tries: (u, v, sigma, 0 or 1) ->
+    sweeps driven from that end.
     """
 
     fracs: tuple
@@ -81,13 +84,16 @@ class ProbeEvidence:
     tilt_failed: dict
     clear: frozenset
     unreached: frozenset
+    sweeps: dict = None
+    sweep_tries: dict = None
 
     def gave_up(self, key, end: int) -> bool:
         return (key, end) in self.unreached
 
 
 def probe_evidence(probe_failures=(), probe_fracs=None, probe_unreachable=(), probe_clear=(),
-                   probe_offsets=None, tilt_failures=()) -> ProbeEvidence:
+                   probe_offsets=None, tilt_failures=(), sweeps=None,
+                   sweep_tries=None) -> ProbeEvidence:
     """detect_fence's probe keywords (same names and meaning) as a :class:`ProbeEvidence`;
     the fractions default to ``evidence.probe_fractions()``."""
     fracs = tuple(probe_fracs) if probe_fracs is not None else probe_fractions()
@@ -97,7 +103,11 @@ def probe_evidence(probe_failures=(), probe_fracs=None, probe_unreachable=(), pr
     pclear = {_key(k) for k in probe_clear}
     # unreached: (key, end) given up from that end
     punreach = {(_key(k), int(k[4])) for k in probe_unreachable}
-    return ProbeEvidence(fracs, frozenset(pfail), poff, tfail, frozenset(pclear), frozenset(punreach))
+    swept = {(int(k[0]), int(k[1]), int(k[2])): tuple((float(a), float(b)) for a, b in iv)
+             for k, iv in (sweeps or {}).items()}
+    tries = {_key(k): int(n) for k, n in (sweep_tries or {}).items()}
+    return ProbeEvidence(fracs, frozenset(pfail), poff, tfail, frozenset(pclear),
+                         frozenset(punreach), swept, tries)
 
 
 def corner_candidates(marks: Marks, ends: Marks, open_sides: Sides) -> tuple[Marks, Marks]:
@@ -176,23 +186,102 @@ def _side_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Prob
     return inner, n_open, n_clear
 
 
+def _end_ray(L: _Local, p: int, q: int, s: int, margin: float) -> float:
+    """How far (rad) past the perpendicular at p, away from q, p's sweep of edge p-q on
+    side s (as seen at p) goes: to the perpendicular of the next fence edge at p on that
+    side (p's open wedge W from q, less pi), plus ``margin``; at least ``margin``, at most
+    pi / 2 (along the edge's own line)."""
+    bp = L.bearings(p)
+    t0 = bp[q]
+    wedge = min(((s * (t - t0)) % (2.0 * math.pi) for l, t in bp.items() if l != q),
+                default=2.0 * math.pi)
+    return min(max(wedge - math.pi, 0.0) + margin, math.pi / 2.0)
+
+
+def _no_room_direction(L: _Local, room: Room, p: int, q: int, s: int) -> float:
+    """The direction (rad, p's frame) a sweep from p on side s of edge p-q first drives:
+    of p's failed drives and its wall contact on that side, the one nearest the edge's
+    perpendicular (it met the wall before); the perpendicular when there is none."""
+    t0 = L.bearings(p)[q]
+    perp = wrap(t0 + s * math.pi / 2.0)
+    cands = list(room.failed.get(p, ()))
+    c = room.contact(p)
+    if c is not None:
+        cands.append(c)
+    on_side = [d for d in cands if 0.0 < s * wrap(d - t0) < math.pi]
+    return min(on_side, key=lambda d: abs(wrap(d - perp))) if on_side else perp
+
+
+def _side_sweeps(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: ProbeEvidence,
+                 e: int, sg: int) -> tuple[list[Deployment], int, int]:
+    """(sweeps still to drive, n_open, n_clear) of side sg of edge e (wall sweeps,
+    coordinator.topology.evidence): closed on evidence (no deployment, n_open 0, n_clear
+    0) once its ends' joined intervals cover (-inf, +inf); else a sweep from each end
+    whose part is not covered and that has tries left, its far line sweep_overlap / 2
+    past where the other end's joined part begins (the middle before it has one). With
+    none left, n_open counts the gaps (an inference closes the side) and n_clear the ends
+    that found room."""
+    ids = cx.ids
+    u, v = int(cx.edges[e, 0]), int(cx.edges[e, 1])
+    iu, iv = int(ids[u]), int(ids[v])
+    gaps = sweep_gaps(ev.sweeps.get((iu, iv, sg), ()) if ev.sweeps else ())
+    if not gaps:
+        return [], 0, 0
+    half = P.sweep_overlap / 2.0
+    # u sweeps (-inf, far_u]: to past the right end of the leftmost gap; v, in its own
+    # fractions, to past the left end of the rightmost gap
+    right = gaps[0][1]
+    left = gaps[-1][0]
+    far_u = min(1.0, max(half, (right if right < math.inf else 0.5) + half))
+    far_v = min(1.0, max(half, 1.0 - (left if left > -math.inf else 0.5) + half))
+    tries = ev.sweep_tries or {}
+    out: list[Deployment] = []
+    n_clear = 0
+    for p, q, end, s, far in ((u, v, 0.0, sg, far_u), (v, u, 1.0, -sg, far_v)):
+        key = (iu, iv, sg, end)
+        if key in ev.clear:
+            n_clear += 1               # found room from this end: its robot stayed there
+            continue
+        lo, hi = (-math.inf, far_u) if end == 0.0 else (1.0 - far_v, math.inf)
+        if not any(a < hi and b > lo for a, b in gaps) or tries.get(key, 0) >= P.sweep_tries:
+            continue
+        d = _no_room_direction(L, room, p, q, s)
+        out.append(Deployment(int(ids[p]), d, (iu, iv), sg, wrap(d - L.bearings(p)[q]),
+                              L.clearance(p, d), "probe", 0.0, P.sweep_depth / P.rv, 0.0,
+                              round(far, 3), _end_ray(L, p, q, s, P.sweep_margin)))
+    return out, (0 if out else len(gaps)), n_clear
+
+
 def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: ProbeEvidence,
-                ends: Marks, marks: Marks) -> tuple[dict[tuple[int, int], list[Deployment]], Marks]:
+                ends: Marks, marks: Marks, open_sides=None
+                ) -> tuple[dict[tuple[int, int], list[Deployment]], Marks]:
     """(probing, marks) for the candidate sides ``ends`` not already marked, in (e,
     sigma) order: a side with probes left is probing (its deployments by via_frac); one
-    with none left is marked closed ('probes', 'probe_clear', 'probe_unreachable') or,
-    with ``TopologyParams.clear_infers`` off and some probe clear, probing with no
-    deployment (the run ends uncertified)."""
+    with none left is marked closed ('probes', 'probe_clear', 'probe_unreachable',
+    'sweep_gap') or, with ``TopologyParams.clear_infers`` off and some probe clear,
+    probing with no deployment (the run ends uncertified). With ``TopologyParams.sweep``
+    a side of an edge with a triangle (one open side in ``open_sides``) is swept
+    (:func:`_side_sweeps`); a dangling edge's sides are probed."""
     marks = dict(marks)
     probing: dict[tuple[int, int], list[Deployment]] = {}
     for e, sg in sorted(ends):
         if (e, sg) in marks:
             continue
-        inner, n_open, n_clear = _side_probes(cx, L, P, room, ev, e, sg)
+        sweep = P.sweep and open_sides is not None and len(open_sides.get(e, ())) == 1
+        if sweep:
+            inner, n_open, n_clear = _side_sweeps(cx, L, P, room, ev, e, sg)
+        else:
+            inner, n_open, n_clear = _side_probes(cx, L, P, room, ev, e, sg)
         if inner:
             probing[(e, sg)] = sorted(inner, key=lambda d: d.via_frac)
         elif n_open == 0 and n_clear == 0:
             marks[(e, sg)] = "probes"         # every probe touched: closed on evidence
+        elif sweep and n_clear == 0:
+            # sweeps stopped short (a robot in the way, lost landmarks) from both ends as
+            # often as they may, and a gap is left: closed, as an INFERENCE
+            marks[(e, sg)] = "sweep_gap"
+        elif sweep and P.clear_infers:
+            marks[(e, sg)] = "probe_clear"    # inferred: an end's sweep found room
         elif n_open == 0 and P.clear_infers:
             marks[(e, sg)] = "probe_clear"    # inferred: some probe found room
         elif n_clear == 0:

@@ -37,6 +37,12 @@ class Deployment:
     tilt: probes only: 0 for a probe perpendicular to the edge; for a TILTED probe (its
       perpendicular probe touched, coordinator.topology.evidence) the CCW angle (rad) from
       the perpendicular to ``bearing``: the touch sector's centre, near the wall's normal.
+    sweep_far: a WALL SWEEP (coordinator.topology.evidence, TopologyParams.sweep) when > 0:
+      the drive along ``bearing`` (its end's own "no room" direction, via_frac 0) is
+      followed, on a touch, by a slide along the wall pressing into it until the robot
+      crosses the perpendicular to the edge at this fraction of the edge from ``vertex``,
+      then back past ``vertex`` until it crosses the ray from ``vertex`` ``sweep_stop``
+      (rad) beyond the edge's perpendicular there (away from the other end).
     A geometric harness executes a probe as: x = p + via_frac * (q - p), then drive from x
     along the perpendicular for depth_rv * rv; a touch within the deployer's
     wall_keep_rv sends the robot home (evidence of a wall), no touch leaves it there.
@@ -52,6 +58,8 @@ class Deployment:
     via_frac: float = 0.0
     depth_rv: float = 0.0
     tilt: float = 0.0
+    sweep_far: float = 0.0
+    sweep_stop: float = 0.0
 
 
 @dataclass(frozen=True)

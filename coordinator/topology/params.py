@@ -44,6 +44,20 @@ class TopologyParams:
       README): 3 deg gave 0.41 rv doors at any angle but 90 robots / 4,231 s against 75 /
       1,785 s (every re-drive disturbs the swarm a little, and more sides get probed);
       11.25 deg 3,824 s; tau 2,155 s. pi never re-drives (the rules before 2026-11-25).
+      Not used when ``sweep`` is on (a sweep follows the wall at whatever angle).
+    sweep: a candidate side closes on WALL SWEEPS (coordinator.topology.evidence): each end
+      drives into its wall, slides along it pressing into it to the line ``sweep_overlap``
+      / 2 past the edge's middle, then back past its own end to the neighbouring side's
+      perpendicular (plus ``sweep_margin``, rad); going round the end of a wall on the way is
+      an opening the robot stays in. False: the perpendicular and tilted probes at
+      door_min_rv spacing (the rules before 2026-11-27).
+    sweep_overlap: fraction of the edge by which the two ends' sweeps overlap (each goes
+      this / 2 past the middle), so bearing noise in where a sweep stops leaves no gap.
+    sweep_margin: how far (rad) past the ray at its end a sweep goes: 10 deg, about 5 cm
+      at a wall 0.3 m out, twice the error of an agent's place from two landmarks seen
+      0.9 m away with 0.5 deg of bearing noise.
+    sweep_tries: sweeps from one end of one side (a sweep stopped short, e.g. by a robot in
+      its way, is tried again with a farther target, up to this many in all).
     """
 
     rv: float = 1.0
@@ -58,6 +72,10 @@ class TopologyParams:
     clear_infers: bool = True
     corner_wait: bool = False
     tilt_min: float | None = None
+    sweep: bool = True
+    sweep_overlap: float = 0.1
+    sweep_margin: float = math.radians(10.0)
+    sweep_tries: int = 2
 
     def __post_init__(self) -> None:
         if self.eps is None:
@@ -74,6 +92,10 @@ class TopologyParams:
             raise ValueError("n_touch must be >= 1")
         if not self.w_obstacle >= 1:
             raise ValueError("w_obstacle must be >= 1")
+        if not 0 <= self.sweep_overlap < 1:
+            raise ValueError("sweep_overlap must be in [0, 1)")
+        if self.sweep_tries < 1:
+            raise ValueError("sweep_tries must be >= 1")
 
     @property
     def tau(self) -> float:
@@ -84,6 +106,14 @@ class TopologyParams:
     def d0(self) -> float:
         """Assumed inter-robot spacing rv - eps."""
         return self.rv - self.eps
+
+    @property
+    def sweep_depth(self) -> float:
+        """How far (rv's unit) from the edge a sweep may follow its wall, and how far its
+        first drive goes: sqrt(d0^2 - (rv / 2)^2), the depth of the lens both ends' d0-disks
+        cover at the middle of an edge rv long (0.75 rv at the defaults). A wall that
+        recedes beyond it leaves room in front of the side: the robot stays there."""
+        return math.sqrt(max(self.d0 ** 2 - 0.25 * self.rv ** 2, 0.0625 * self.rv ** 2))
 
     @property
     def corner_threshold(self) -> float:

@@ -13,7 +13,7 @@ from typing import Mapping, Sequence
 from swarmcover.ground.angles import wrap
 
 __all__ = ["MoveTarget", "frontier_desired_bearings", "push_desired_bearings", "plan_push_targets",
-           "probe_via_bearings"]
+           "probe_via_bearings", "star_shape"]
 
 
 @dataclass(frozen=True)
@@ -170,3 +170,46 @@ def probe_via_bearings(
     if best is not None and best[0] > math.sin(math.radians(15.0)):
         out[best[1]] = best[2]
     return out
+
+
+def star_shape(nbrs: Mapping[int, Mapping[int, float]], p: int, q: int, reach: float = 2.5
+               ) -> dict[int, tuple[float, float]]:
+    """Where the robots around p stand, in p's body frame with p at the origin and |pq| = 1,
+    from bearings alone: q on its bearing at distance 1, then, breadth-first, every vertex
+    w that two placed vertices a, b seeing each other both see: the triangle's angles at a
+    and at b (each robot's bearings in its own frame, so only differences of one robot's
+    bearings are used) fix w on the side of ab it is seen on. The landmarks of a wall sweep
+    from p (coordinator.topology.evidence): vertices farther than ``reach`` (|pq| units)
+    from p, and triangles too thin (an angle under 5 deg) to fix a point, are left out."""
+    bp = nbrs.get(p, {})
+    if q not in bp or p not in nbrs.get(q, {}):
+        return {}
+    pos: dict[int, tuple[float, float]] = {p: (0.0, 0.0), q: (math.cos(bp[q]), math.sin(bp[q]))}
+    thin = math.radians(5.0)
+    edges = [(p, q)]
+    k = 0
+    while k < len(edges):
+        a, b = edges[k]
+        k += 1
+        ba, bb = nbrs.get(a, {}), nbrs.get(b, {})
+        if b not in ba or a not in bb:
+            continue
+        for w in sorted(set(ba) & set(bb)):
+            if w in pos:
+                continue
+            ta = wrap(float(ba[w]) - float(ba[b]))     # at a, from b to w (signed)
+            tb = wrap(float(bb[w]) - float(bb[a]))     # at b, from a to w
+            A, B = abs(ta), abs(tb)
+            if A < thin or B < thin or A + B > math.pi - thin or (ta > 0) == (tb > 0):
+                continue
+            (ax, ay), (bx, by) = pos[a], pos[b]
+            ab = math.hypot(bx - ax, by - ay)
+            d = ab * math.sin(B) / math.sin(A + B)     # |aw|, law of sines
+            ang = math.atan2(by - ay, bx - ax) + ta    # the direction a -> w
+            wx, wy = ax + d * math.cos(ang), ay + d * math.sin(ang)
+            if math.hypot(wx, wy) > reach:
+                continue
+            pos[w] = (wx, wy)
+            edges += [(a, w), (b, w)]
+    del pos[p]
+    return pos

@@ -1,0 +1,268 @@
+"""The wall sweep: a test drive's touch followed along the wall (Task.sweep_*).
+
+Pure, like every mode (see :mod:`agents.modes`): no I/O, ``Sense.t`` the only clock. The
+rule is the coordinator's (coordinator.topology.evidence); bench/sweep.py emulates it on
+a polygon map.
+
+Where the robot is comes from bearings alone: the task gives the positions of some of its
+vertex's neighbours (``Task.sweep_landmarks`` / ``sweep_points``: the reference frame, the
+vertex at the origin, metres on the coordinator's estimate of the edge's length), and the
+lines through them along the bearings they are seen at meet where the robot stands
+(:func:`locate`). Only the fractions along the edge and the angle at the vertex are used to
+end the sweep, and both are ratios: the scale's error does not move them. Between fixes it
+dead-reckons (from the vertex, along the first drive, before any): free, its command; along
+a wall it felt, the slowest progress the wall allows, cos(press + tau) cos(tau) of its
+speed along the tangent it believes in (the true normal lies within tau of the felt
+sector's centre), so it never believes itself farther along than it is: it then sweeps
+farther than needed, never less. A fix moves the dead-reckoned place _BLEND of the way to
+it (one tick's fix from two landmarks 0.9 m away, with 0.5 deg of noise, is off by a few
+centimetres; the blend averages that out over the ticks).
+
+The robot keeps the wall on one hand. Its wall normal n (reference frame) starts as the
+centre of the touch sector that stopped the test drive; it moves along cos(press) t +
+sin(press) n (t the tangent towards where it goes) without wall sliding, so it presses
+into the wall and slides along it (press > 180 / n_touch deg: whatever the true normal in
+that sector). n turns towards walls ahead: to the sector 90 deg ahead (a concave corner),
+or to the one 45 deg ahead when n's own sector feels nothing (the wall bending towards the
+robot; a jamb's tip is felt 45 deg ahead while the wall it ends still touches at n). No
+wall felt from 45 deg behind n to 90 deg ahead for sweep_lost_m of travel: the wall ended
+or bent away, and n turns one sector back, so the robot goes round the wall's end. Turns
+back that add up to 135 deg since the last turn into a wall (the robot is going round the
+end of a wall, into what lies behind it: a door, the back of a box) are an opening at
+least a body wide: a narrower gap stops the body on its far side, a turn into a wall. A
+jagged or bending wall, a niche or a box's corner turn it back as far as forward, or less.
+Into an opening the robot drives on along the normal of the wall whose end it went round
+(through a door: straight through the wall) until it is ``sweep_depth`` from the edge, or
+a touch blocks it, and stays there as a new robot (a clear probe).
+
+Phase 1 goes towards the edge's other end until it crosses the edge's perpendicular at
+``sweep_far``; phase 2 back past the vertex until it crosses the ray ``sweep_stop`` beyond
+the perpendicular there. A phase stops short after sweep_budget_rv of travel, or when a
+robot's touch sector blocks the way; the edge's other end blocking phase 1 counts as reaching ``sweep_far`` (no third body fits between them).
+"""
+from __future__ import annotations
+
+import math
+from typing import Mapping
+
+from swarmcover.bus.messages import Task, sweep_reason
+
+from .control import FrameTracker, blocks, wrap
+from .modes import Context, Mode, ModeState, Outcome, Tick
+
+PI = math.pi
+# two landmarks whose bearings are closer than this to parallel do not fix a point
+_MIN_SPREAD = 1.0 - math.cos(math.radians(30.0))
+_BLEND = 0.3
+# turns round a wall's end (since the last turn into a wall) that make an opening
+OPEN_TURN = 3.0 * PI / 4.0
+
+
+def locate(bearings: Mapping[int, float], points: Mapping[int, tuple[float, float]]
+           ) -> tuple[float, float] | None:
+    """Where a robot stands that sees each landmark l of ``points`` at ``bearings[l]``
+    (rad, the points' frame): the least-squares meeting point of the lines through the
+    points along those bearings (the points' unit). None with fewer than two such
+    landmarks, or when their bearings are all within about 30 deg of parallel."""
+    sxx = sxy = syy = bx = by = 0.0
+    n = 0
+    for l, b in bearings.items():
+        pt = points.get(l)
+        if pt is None:
+            continue
+        nx, ny = -math.sin(b), math.cos(b)        # the line's normal: n . (R - P) = 0
+        c = nx * pt[0] + ny * pt[1]
+        sxx += nx * nx
+        sxy += nx * ny
+        syy += ny * ny
+        bx += nx * c
+        by += ny * c
+        n += 1
+    if n < 2:
+        return None
+    half = 0.5 * (sxx + syy)
+    lam = half - math.sqrt(max(half * half - (sxx * syy - sxy * sxy), 0.0))
+    if lam < _MIN_SPREAD:
+        return None
+    det = sxx * syy - sxy * sxy
+    return ((syy * bx - sxy * by) / det, (sxx * by - sxy * bx) / det)
+
+
+class SweepGeom:
+    """A sweep's edge in the task's reference frame: the vertex at the origin, the other
+    end at ``q`` (the first sweep landmark's point), the side swept ``side`` (+1 CCW of
+    the edge's direction), ``far`` (fraction), ``stop`` (rad), ``depth`` (m)."""
+
+    __slots__ = ("ex", "ey", "nx", "ny", "length", "far", "stop", "depth", "points", "other")
+
+    def __init__(self, task: Task):
+        pts = task.sweep_points
+        self.points = {int(l): (float(pts[2 * k]), float(pts[2 * k + 1]))
+                       for k, l in enumerate(task.sweep_landmarks)}
+        self.other = int(task.sweep_landmarks[0]) if task.sweep_landmarks else -1
+        qx, qy = self.points.get(self.other, (math.cos(task.sweep_edge), math.sin(task.sweep_edge)))
+        self.length = math.hypot(qx, qy) or 1.0
+        self.ex, self.ey = math.cos(task.sweep_edge), math.sin(task.sweep_edge)
+        s = 1.0 if task.sweep_side > 0 else -1.0
+        self.nx, self.ny = -s * self.ey, s * self.ex
+        self.far, self.stop, self.depth = task.sweep_far, task.sweep_stop, task.sweep_depth
+
+    def frac(self, R) -> float:
+        """R's projection on the edge, as a fraction from the vertex."""
+        return (R[0] * self.ex + R[1] * self.ey) / self.length
+
+    def phi(self, R) -> float:
+        """Angle (rad) at the vertex from the edge's perpendicular to R, positive away from
+        the other end."""
+        return math.atan2(-(R[0] * self.ex + R[1] * self.ey), R[0] * self.nx + R[1] * self.ny)
+
+    def depth_of(self, R) -> float:
+        """Distance from R to the edge segment (the points' unit)."""
+        t = min(1.0, max(0.0, self.frac(R))) * self.length
+        return math.hypot(R[0] - t * self.ex, R[1] - t * self.ey)
+
+
+class Sweep(ModeState):
+    """Slide along the wall touched at body bearing ``n_body`` (rad): see the module
+    docstring. ``start``: where the touch happened, dead-reckoned from the vertex (the
+    reference frame, m), for when no two landmarks are in view there. Ends DONE "opening"
+    / "room" (the robot stays where it is) or SWEPT with the reason
+    :func:`bus.messages.sweep_reason`; ``R`` is the last position found (the reference
+    frame, m), for the way back."""
+    mode = Mode.SWEEP
+
+    def __init__(self, task: Task, frame: FrameTracker | None, n_body: float, ctx: Context,
+                 start: tuple[float, float] | None = None):
+        see = ctx.see
+        self.geom = SweepGeom(task)
+        self.frame = frame
+        psi = see.psi(frame)
+        self.n = wrap(n_body - psi)          # wall normal, reference frame (rad)
+        tx, ty = math.cos(self.n - PI / 2.0), math.sin(self.n - PI / 2.0)
+        along = tx * self.geom.ex + ty * self.geom.ey
+        away = tx * self.geom.nx + ty * self.geom.ny
+        # phase 1 keeps the wall on the hand that moves it towards the other end
+        self.h = 1 if along > 1e-9 or (abs(along) <= 1e-9 and away > 0.0) else -1
+        self.phase = 1
+        self.R: tuple[float, float] | None = start   # where it is (reference frame, m)
+        self.hi, self.lo = -math.inf, math.inf
+        self.lost = 0.0                      # travel with no wall felt (m)
+        self.turned = 0.0                    # turned round a wall's end (rad)
+        self.n0 = self.n                     # the normal of the wall it goes round (rad)
+        self.into: float | None = None       # an opening found: driving into it (rad)
+        self.travelled = 0.0                 # travel in this phase (m)
+        self.mark = see.advance
+        self.v = (0.0, 0.0)                  # last command (reference frame, m/s)
+
+    @classmethod
+    def after(cls, out, task: Task, offset: float, ctx: Context) -> "Sweep":
+        """The sweep that follows the touch ending ``out``, an :class:`agents.openloop.Open`
+        test leg whose blocking touch sector lies ``offset`` (rad) off its direction: the
+        wall's normal is that sector, the touch point ``out`` 's travel along its direction
+        from the vertex."""
+        went, d = out.travelled(ctx.see), out.leg.direction
+        return cls(task, out.leg.frame, wrap(out.leg.body_direction(ctx.see) + offset), ctx,
+                   (went * math.cos(d), went * math.sin(d)))
+
+    def _felt(self, psi: float, obst) -> dict[int, float]:
+        """Touching sectors on the pressed side, by their angle from n towards the tangent
+        (-45, 0, 45 or 90 deg, the nearest class) -> the sector (reference frame, rad)."""
+        out: dict[int, float] = {}
+        for c in obst:
+            cr = wrap(c - psi)
+            a = math.degrees(-self.h * wrap(cr - self.n))
+            k = int(round(a / 45.0)) * 45
+            if -45 <= k <= 90 and k not in out:
+                out[k] = cr
+        return out
+
+    def _end(self, why: str = "") -> Tick:
+        lo = -math.inf if why == "end" else self.lo
+        return Tick(outcome=Outcome.SWEPT, reason=sweep_reason(self.hi, lo))
+
+    def _phase_two(self) -> None:
+        """Back towards the vertex: the other hand, counts from zero."""
+        self.phase, self.h = 2, -self.h
+        self.lost = self.travelled = self.turned = 0.0
+
+    def _drive_into(self, ctx: Context, psi: float) -> Tick:
+        """Into an opening along ``into``: done "opening" (the robot stays there) at
+        ``depth`` from the edge or after that far, or when a touch sector, a wall's or a
+        robot's, blocks the way."""
+        p, see, g = ctx.p, ctx.see, self.geom
+        body = wrap(self.into + psi)
+        if (g.depth_of(self.R) >= g.depth or self.travelled >= g.depth
+                or any(blocks(body, c, p.tau) for c in (*see.obst, *see.bump))):
+            return Tick(outcome=Outcome.DONE, reason="opening")
+        speed = p.test_drive_speed_frac * p.v_max
+        self.v = (speed * math.cos(self.into), speed * math.sin(self.into))
+        return Tick(speed * math.cos(body), speed * math.sin(body), intent=body)
+
+    def tick(self, ctx: Context) -> Tick:
+        p, see, g = ctx.p, ctx.see, self.geom
+        psi = see.psi(self.frame)
+        step = max(0.0, see.advance - self.mark)
+        self.mark = see.advance
+        self.travelled += step
+        felt = self._felt(psi, see.obst)
+        fix = locate({l: wrap(b - psi) for l, b in see.seen.items() if l in g.points}, g.points)
+        if self.R is None:
+            if fix is None:
+                self.hi = self.lo = 0.0      # never found where it is: nothing joined
+                return self._end()
+            self.R = fix
+        # dead reckoning, along a felt wall at the slowest progress it allows; then the fix
+        vx, vy = self.v
+        if felt and self.into is None:
+            t = self.n - self.h * PI / 2.0
+            k = math.hypot(vx, vy) * math.cos(p.press + p.tau) * math.cos(p.tau)
+            vx, vy = k * math.cos(t), k * math.sin(t)
+        R = (self.R[0] + vx * see.dt, self.R[1] + vy * see.dt)
+        if fix is not None:
+            R = (R[0] + _BLEND * (fix[0] - R[0]), R[1] + _BLEND * (fix[1] - R[1]))
+        self.R = R
+        if self.into is not None:
+            return self._drive_into(ctx, psi)
+        f = g.frac(R)
+        self.hi, self.lo = max(self.hi, f), min(self.lo, f)
+        if felt:
+            self.lost = 0.0
+            if 90 in felt:
+                self.n, self.turned = felt[90], 0.0    # a wall across the way: a corner
+            elif 45 in felt and 0 not in felt:
+                self.n, self.turned = felt[45], 0.0    # the wall bends towards the robot
+        else:
+            self.lost += step
+            if self.lost >= p.sweep_lost_m:
+                # the wall ended or bent away: one sector back, round its end
+                if self.turned == 0.0:
+                    self.n0 = self.n
+                self.n = wrap(self.n + self.h * 2.0 * p.tau)
+                self.turned += 2.0 * p.tau
+                self.lost = 0.0
+        if self.phase == 1 and f >= g.far:
+            self._phase_two()
+        if self.phase == 2 and g.phi(R) >= g.stop and math.hypot(*R) > 1e-6:
+            return self._end("end")
+        if g.depth_of(R) > g.depth:
+            return Tick(outcome=Outcome.DONE, reason="room")
+        t = self.n - self.h * PI / 2.0
+        d = wrap(math.atan2(math.cos(p.press) * math.sin(t) + math.sin(p.press) * math.sin(self.n),
+                            math.cos(p.press) * math.cos(t) + math.sin(p.press) * math.cos(self.n)))
+        body = wrap(d + psi)
+        bumps = [c for c in see.bump if blocks(body, c, p.tau)]
+        if self.travelled >= p.sweep_budget_rv * p.rv or bumps:
+            if self.phase == 2:
+                return self._end()
+            if bumps and g.other in see.seen and any(
+                    abs(wrap(c - see.seen[g.other])) <= p.tau for c in bumps):
+                self.hi = max(self.hi, g.far)   # the other end's body: the wall goes on there
+            self._phase_two()
+            return Tick()
+        if self.turned >= OPEN_TURN - 1e-9:
+            # an opening: into it along the normal of the wall it went round
+            self.into, self.travelled = self.n0, 0.0
+            return self._drive_into(ctx, psi)
+        speed = p.test_drive_speed_frac * p.v_max
+        self.v = (speed * math.cos(d), speed * math.sin(d))
+        return Tick(speed * math.cos(body), speed * math.sin(body), intent=body, slide=False)

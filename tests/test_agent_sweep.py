@@ -1,0 +1,216 @@
+"""The agent's wall sweep (agents/sweep.py): where it is from bearings, and the sweep itself
+in the world's own physics and touch sensors (world.physics, world.sensing), in process.
+
+The scene: a wall along y = 0 (0.1 m thick, a second room below it), the sweeping robot 0
+at (0, Y) on a fence edge to robot 1 at (0.9, Y), more robots of the swarm behind them; the
+task is what the coordinator sends (tests/test_sweep.py covers the coordinator's side):
+drive towards the wall, slide along it to fraction ``far`` of the edge 0-1, then back past
+robot 0's vertex to the ray 5 deg beyond the perpendicular there.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from swarmcover.agents.behaviours import Behaviour
+from swarmcover.agents.params import AgentParams
+from swarmcover.agents.sweep import SweepGeom, locate
+from swarmcover.bus.messages import Sense, Task, parse_sweep_reason
+from swarmcover.ground.angles import wrap
+from swarmcover.coordinator.topology.targets import star_shape
+from swarmcover.world.maps import WorldMap
+from swarmcover.world.physics import Physics
+from swarmcover.world.sensing import Sensors
+
+R = 0.06
+Y = 0.35          # the fence line's distance from the wall
+D0 = 0.9
+
+
+# ----------------------------------------------------------------------- bearings alone
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.floats(-1.5, 1.5), st.floats(-1.5, 1.5)), min_size=2, max_size=6),
+       st.floats(-1.0, 1.0), st.floats(-1.0, 1.0), st.floats(0.2, 3.0))
+def test_locate_finds_the_robot_from_the_bearings_of_known_points(pts, x, y, scale):
+    """Exact bearings to points at known places give the robot's place (least squares),
+    in the points' unit whatever it is; points seen nearly in line give None, never a
+    wrong place."""
+    pts = {k: (px, py) for k, (px, py) in enumerate(pts) if math.hypot(px - x, py - y) > 0.05}
+    brg = {k: math.atan2(py - y, px - x) for k, (px, py) in pts.items()}
+    got = locate(brg, pts)
+    if got is not None:
+        assert got == pytest.approx((x, y), abs=1e-6)
+        scaled = locate(brg, {k: (scale * px, scale * py) for k, (px, py) in pts.items()})
+        assert scaled == pytest.approx((scale * x, scale * y), abs=1e-6)
+    else:
+        # fewer than two, or all bearings within about 30 deg of one line
+        ok = [b for b in brg.values()]
+        assert len(ok) < 2 or all(abs(math.sin(a - ok[0])) < math.sin(math.radians(31)) for a in ok)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.floats(-math.pi, math.pi), st.floats(0.3, 1.0), st.floats(-0.5, 1.5),
+       st.floats(-0.8, 0.8), st.sampled_from([1, -1]))
+def test_sweep_geometry_reads_fraction_angle_and_depth_off_the_edge(edge, length, f, h, side):
+    """SweepGeom: the projection fraction along the edge, the angle at the vertex past its
+    perpendicular and the distance to the segment, for a point at fraction f, offset h on
+    the swept side."""
+    ex, ey = math.cos(edge), math.sin(edge)
+    s = side
+    nx, ny = -s * ey, s * ex
+    task = Task(kind="test_drive", sweep_side=s, sweep_edge=edge, sweep_landmarks=[7],
+                sweep_points=[length * ex, length * ey]).validate()
+    g = SweepGeom(task)
+    P = (f * length * ex + h * nx, f * length * ey + h * ny)
+    assert g.frac(P) == pytest.approx(f, abs=1e-9)
+    if math.hypot(f * length, h) > 1e-6:       # the angle at the vertex itself is none
+        assert abs(wrap(g.phi(P) - math.atan2(-f * length, h))) < 1e-9
+    t = min(1.0, max(0.0, f))
+    assert g.depth_of(P) == pytest.approx(math.hypot((f - t) * length, h), abs=1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 10**6))
+def test_star_shape_places_the_neighbours_from_bearings_alone(seed):
+    """coordinator.topology.targets.star_shape: every robot it places around p stands
+    where it is, in p's body frame, |pq| = 1; the robots' own frames may be rotated."""
+    rng = np.random.default_rng(seed)
+    P = rng.uniform(-1.2, 1.2, (14, 2))
+    P[0], P[1] = (0.0, 0.0), (rng.uniform(0.4, 0.9), rng.uniform(-0.3, 0.3))
+    head = rng.uniform(-math.pi, math.pi, len(P))
+    nbrs = {i: {j: math.atan2(*(P[j] - P[i])[::-1]) - head[i] for j in range(len(P))
+                if j != i and np.linalg.norm(P[j] - P[i]) <= 1.0} for i in range(len(P))}
+    got = star_shape(nbrs, 0, 1)
+    assert 1 in got
+    L = float(np.linalg.norm(P[1]))
+    c, s = math.cos(-head[0]), math.sin(-head[0])
+    for k, (x, y) in got.items():
+        tx, ty = c * P[k][0] - s * P[k][1], s * P[k][0] + c * P[k][1]
+        assert (x * L, y * L) == pytest.approx((tx, ty), abs=1e-6)
+
+
+# ----------------------------------------------------------------------- in the world
+def _scene(door: float | None, ang: float = 0.0, others=()):
+    """The wall (a door [0.6, 0.6 + door] in it, if any) and the swarm, turned by ``ang``
+    (deg) about the origin: (WorldMap, {robot: (x, y)}, rotation)."""
+    a, T = 0.6, 0.1
+    rot = math.radians(ang)
+    M = np.array([[math.cos(rot), -math.sin(rot)], [math.sin(rot), math.cos(rot)]])
+    if door is None:
+        ring = [[-2, 0], [3, 0], [3, 2], [-2, 2]]
+    else:
+        ring = [[-2, 0], [a, 0], [a, -T], [-2, -T], [-2, -2], [3, -2], [3, -T], [a + door, -T],
+                [a + door, 0], [3, 0], [3, 2], [-2, 2]]
+    wm = WorldMap("sweep", np.array(ring, float) @ M.T, [], np.zeros((0, 3)))
+    pts = {0: (0.0, Y), 1: (D0, Y), 2: (D0 / 2, Y + 0.78), 3: (-D0 / 2, Y + 0.78),
+           4: (1.5 * D0, Y + 0.78), 5: (-D0, Y), 6: (2 * D0, Y), 8: (0.0, Y + 1.56)}
+    pts.update(others)
+    return wm, {k: tuple(np.array(p) @ M.T) for k, p in pts.items()}, rot
+
+
+def _task(pts, rot, far=0.9, stop_deg=10.0, direction_deg=-70.0):
+    """The sweep task the coordinator would send robot 0: landmark places from bearings
+    (star_shape) at d0 per edge length, its vertex's bearings to home back on."""
+    nb = {i: {j: math.atan2(q[1] - p[1], q[0] - p[0]) for j, q in pts.items()
+              if j != i and math.dist(p, q) <= 1.0} for i, p in pts.items()}
+    shape = star_shape(nb, 0, 1)
+    lms = [1] + sorted(k for k in shape if k != 1)
+    home = sorted(nb[0])
+    return Task(task_id=1, robot=0, kind="test_drive", vertex=0, landmarks=home,
+                bearings=[nb[0][k] for k in home], direction=math.radians(direction_deg) + rot,
+                distance=0.75, keep_after=0.0, timeout_s=80.0, sweep_side=-1,
+                sweep_edge=nb[0][1], sweep_far=far, sweep_stop=math.radians(stop_deg),
+                sweep_depth=0.75, sweep_landmarks=lms,
+                sweep_points=[c * D0 for k in lms for c in shape[k]]).validate()
+
+
+def _run(wm, pts, task, ticks=1500, noise_deg=0.5, seed=0):
+    """Robot 0 runs ``task`` with the world's physics and sensors (the others hold still):
+    (behaviour, trace of robot 0's (x, y) per tick, its mode per tick)."""
+    phys = Physics(wm, radius=R, v_max=0.5, w_max=2.0, dt=0.05)
+    sens = Sensors(wm, 1.0, radius=R, noise_sigma=math.radians(noise_deg), n_touch=8,
+                   skin=0.015, rng=np.random.default_rng(seed))
+    for k, (x, y) in pts.items():
+        phys.add(k, x, y, 0.0, "holonomic", False, exact=True)
+    beh = Behaviour(AgentParams(), 0)
+    beh.on_task(task)
+    trace, modes = [], []
+    for tick in range(ticks):
+        ids, pos, th = phys.state()
+        k0 = ids.index(0)
+        per = sens.sense(pos, th).lists(ids)
+        cmd = beh.step(Sense(robot=0, tick=tick, t=tick * 0.05, **per[k0]))
+        trace.append(tuple(pos[k0]))
+        modes.append(beh.mode)
+        cmds = np.zeros((len(ids), 3))
+        cmds[k0] = (cmd.vx, cmd.vy, cmd.wz)
+        phys.step(cmds)
+        if beh.task_state in ("done", "failed"):
+            break
+    ids, pos, _ = phys.state()
+    trace.append(tuple(pos[ids.index(0)]))
+    modes.append(beh.mode)
+    return beh, np.array(trace), np.array([str(m) for m in modes])
+
+
+def _local(trace, rot):
+    """The trace in the scene's own axes (the wall along x, y = 0)."""
+    c, s = math.cos(-rot), math.sin(-rot)
+    return np.stack([c * trace[:, 0] - s * trace[:, 1], s * trace[:, 0] + c * trace[:, 1]], 1)
+
+
+@pytest.mark.parametrize("ang", [0.0, 22.5])
+def test_a_sweep_slides_along_the_wall_and_reports_the_part_it_joined(ang):
+    """No door: the robot presses along the wall to the far line, back past its vertex to
+    the ray, then home; it reports "swept HI end" with HI at least the far fraction, and
+    stayed in touch with the wall all along (within r + skin), at any angle of the wall to
+    the touch sectors (22.5 deg: the worst). With one landmark in view (robot 1) it
+    dead-reckons at the slowest progress the wall allows, so it may go on past the far
+    line; it never stops short of it."""
+    wm, pts, rot = _scene(None, ang)
+    beh, trace, modes = _run(wm, pts, _task(pts, rot, far=0.6))
+    assert beh.task_state == "failed", beh.reason
+    hi, lo = parse_sweep_reason(beh.reason)
+    assert lo == -math.inf and hi >= 0.6
+    order = [m for k, m in enumerate(modes) if k == 0 or modes[k - 1] != m]
+    assert order[:2] == ["open", "sweep"] and order[2] in ("open", "home")
+    on_wall = _local(trace, rot)[modes == "sweep"]
+    assert len(on_wall) > 40
+    assert on_wall[:, 1].max() < R + 0.015 + 0.005 and on_wall[:, 1].min() > R - 0.005
+    # it went as far as the far line and back past the vertex (x = 0) to the ray 10 deg
+    # beyond (x = -0.05 at the wall; its place from bearings is good to about 2 cm there)
+    assert on_wall[:, 0].max() >= 0.6 * D0 - 0.02
+    assert on_wall[:, 0].min() < -(Y - R) * math.tan(math.radians(10.0)) + 0.025
+    # and is home again
+    assert math.dist(trace[-1], pts[0]) < 0.03
+
+
+@pytest.mark.parametrize("door, ang", [(0.20, 0.0), (0.20, 22.5), (0.30, 10.0), (0.25, 40.0)])
+def test_a_door_a_body_wide_is_an_opening_the_robot_stays_in(door, ang):
+    """A door 0.20 m wide or more (a 0.12 m body): the sweep goes round its jamb, drives on
+    into it along the wall's normal and stays where that ends, done "opening": past the
+    wall's front face, in the doorway (a jamb blocked it) or in the room beyond."""
+    wm, pts, rot = _scene(door, ang)
+    beh, trace, _ = _run(wm, pts, _task(pts, rot))
+    assert beh.task_state == "done" and beh.reason == "opening"
+    x, y = _local(trace, rot)[-1]
+    assert 0.6 - 2 * R < x < 0.6 + door and y < 0.0
+
+
+def test_a_door_narrower_than_the_body_is_swept_past():
+    wm, pts, rot = _scene(0.10)
+    beh, _, _ = _run(wm, pts, _task(pts, rot))
+    assert beh.task_state == "failed" and parse_sweep_reason(beh.reason)[1] == -math.inf
+
+
+def test_a_robot_in_the_way_stops_the_sweep_short():
+    """Robot 9 rests against the wall at x = 0.45: the sweep stops short of it (it never
+    pushes a robot), goes back, and reports how far it got."""
+    wm, pts, rot = _scene(None, 0.0, {9: (0.45, R + 0.002)})
+    beh, trace, _ = _run(wm, pts, _task(pts, rot, far=0.9))
+    hi, lo = parse_sweep_reason(beh.reason)
+    assert lo == -math.inf and hi < 0.45 / D0
+    assert _local(trace, rot)[:, 0].max() < 0.45 - 2 * R + 0.01
