@@ -331,19 +331,17 @@ def _job_spec(snap: Snapshot, params: TopologyParams, pth, vid: int, test_drive:
         spec.test_drive = True
         spec.distance = dep.depth_rv * params.rv if dep.depth_rv > 0 else None
         spec.via_frac = float(dep.via_frac)
-        if dep.sweep_far > 0 and dep.edge is not None:
-            q = dep.edge[1] if dep.edge[0] == f else dep.edge[0]
+        q = None if dep.edge is None else (dep.edge[1] if dep.edge[0] == f else dep.edge[0])
+        nf = snap.nbrs.get(f, {})
+        if dep.sweep_far > 0 and q is not None:
             spec.sweep_far, spec.sweep_stop = float(dep.sweep_far), float(dep.sweep_stop)
             spec.sweep_side = int(dep.sigma) if dep.edge[0] == f else -int(dep.sigma)
-            spec.sweep_edge = float(snap.nbrs.get(f, {}).get(q, 0.0))
+            spec.sweep_edge = float(nf.get(q, 0.0))
             spec.sweep_points = star_shape(snap.nbrs, f, q)
-        if dep.via_frac > 0 and dep.edge is not None:
-            q = dep.edge[1] if dep.edge[0] == f else dep.edge[0]
-            nf = snap.nbrs.get(f, {})
-            if q in nf:
-                via = probe_via_bearings(nf, snap.nbrs.get(q, {}), f, q, float(dep.via_frac))
-                spec.via_landmarks = list(via)
-                spec.via_bearings = [via[v] for v in via]
+        if dep.via_frac > 0 and q is not None and q in nf:
+            via = probe_via_bearings(nf, snap.nbrs.get(q, {}), f, q, float(dep.via_frac))
+            spec.via_landmarks = list(via)
+            spec.via_bearings = [via[v] for v in via]
     return spec
 
 

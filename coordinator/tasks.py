@@ -167,7 +167,7 @@ class TaskBuilder:
         if not task.sweep_landmarks or task.sweep_landmarks[0] != occ.get(q):
             task.sweep_landmarks, task.sweep_points = [], []
             return                         # no other end in view: a plain test drive
-        task.sweep_side = 1 if spec.sweep_side > 0 else -1
+        task.sweep_side = spec.sweep_side            # +1 / -1, set by the planner
         task.sweep_edge = spec.sweep_edge
         task.sweep_far = spec.sweep_far
         task.sweep_stop = spec.sweep_stop
