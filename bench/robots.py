@@ -1,0 +1,214 @@
+"""Where a certified swarm's robots go (issue 19: spacing, walls, redundancy).
+
+Runs each config in-process (swarmcover.simloop, the same nodes as ``swarmcover run``) and
+looks at the swarm it certifies, with the world's ground truth:
+
+* **by place**: a vertex is a *wall* vertex when its robot stands within 0.5 rv of a wall,
+  else *interior*. Rips edges by their ends (interior-interior ``ii``, wall-interior ``wi``,
+  wall-wall ``ww``): count, mean length, quantiles, how many are shorter than 0.6 rv; each
+  vertex's nearest neighbour (median by class). ``wall_row`` is what a row of robots along
+  every wall ring at spacing d0 would need (sum of max(3, ceil(length / d0))), so
+  ``wall_vertices - wall_row`` is what the walls cost beyond a spaced row.
+* **by origin**: how each wall vertex got there, from the agents' Status messages (the
+  bus): the last test drive that ended done near where it stands (within 0.2 m) with
+  reason ``wall`` (a touch far enough out: the robot kept there), ``opening`` or ``room``
+  (a wall sweep's: agents/sweep.py); ``other`` when none did (lattice deploys, pushes).
+* **redundancy** (spec 5.3-5.4): the distinct vertices the coordinator's local link test
+  called redundant over the run (each then started a push instead of a new robot), the
+  passes, and what the spec's global greedy (remove a robot off the fence while
+  D x = z stays solvable over GF(2) on the triangles left and the 1-skeleton stays
+  connected) would remove beyond it on the last certified complex.
+
+The redundancy numbers come from wrapping coordinator.topology.redundancy.find_redundant
+(experiment code observing the coordinator; the run's decisions are unchanged).
+
+    python bench/robots.py                                  # every config, seed 0
+    python bench/robots.py configs/small.toml --seeds 0 1   # prints a table, then JSON
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench.common import eprint  # noqa: E402
+
+WALL_RV = 0.5          # a vertex within this of a wall (x rv) is a wall vertex
+SHORT_RV = 0.6         # an edge shorter than this (x rv) is counted short
+MATCH_M = 0.2          # a wall vertex's origin: a drive's end within this (m)
+ORIGINS = ("wall", "opening", "room")
+
+
+def global_extra(cx, fence, cert, protected) -> list[int]:
+    """Robots (node indices) the spec's global greedy (5.3 step 5) removes from ``cx``
+    beyond the fence vertices, ``cert.z``'s vertices and ``protected``: one at a time
+    (highest degree first), kept out while z stays in the span of the surviving
+    triangles' boundaries and the surviving 1-skeleton is connected."""
+    from swarmcover.coordinator.topology.gf2 import in_span
+    n, z = cx.n, np.asarray(cert.z)
+    zmask = 0
+    for e in z.tolist():
+        zmask |= 1 << int(e)
+    eid = {tuple(sorted(map(int, cx.edges[k]))): k for k in range(cx.n_edges)}
+    tri = cx.triangles
+    cols = [(1 << eid[tuple(sorted((a, b)))]) | (1 << eid[tuple(sorted((a, c)))])
+            | (1 << eid[tuple(sorted((b, c)))]) for a, b, c in tri.tolist()]
+    keep = np.zeros(n, bool)
+    ids = [p for p in protected if p in cx] + [v for v in fence.fence_vertices if v in cx]
+    if ids:
+        keep[cx.index(ids)] = True
+    if z.size:
+        keep[cx.edges[z].ravel()] = True
+    alive = np.ones(n, bool)
+    u, v = cx.edges[:, 0], cx.edges[:, 1]
+    removed = []
+    for c in sorted(np.nonzero(~keep)[0].tolist(), key=lambda p: (-int(cx.degree[p]), p)):
+        alive[c] = False
+        if in_span([cols[t] for t in np.nonzero(alive[tri].all(axis=1))[0].tolist()], zmask):
+            ke = alive[u] & alive[v]
+            idx = np.nonzero(alive)[0]
+            re = -np.ones(n, int)
+            re[idx] = np.arange(idx.size)
+            g = csr_matrix((np.ones(int(ke.sum())), (re[u[ke]], re[v[ke]])),
+                           shape=(idx.size, idx.size))
+            if connected_components(g, directed=False)[0] == 1:
+                removed.append(c)
+                continue
+        alive[c] = True
+    return removed
+
+
+def _stats(lengths: list[float], rv: float) -> dict:
+    a = np.asarray(lengths, float) / rv
+    if not a.size:
+        return {"n": 0}
+    return {"n": int(a.size), "mean": round(float(a.mean()), 3),
+            "q10_50_90": [round(float(x), 2) for x in np.quantile(a, [.1, .5, .9])],
+            "short": int((a < SHORT_RV).sum())}
+
+
+def run(config: str, seed: int, timeout: float) -> dict:
+    import swarmcover.coordinator.topology.redundancy as red
+    from swarmcover.run import default_robots_max
+    from swarmcover.simloop import SimLoop
+    from swarmcover.world.config import load_config
+    from swarmcover.world.groundtruth import ring_lengths
+    from swarmcover.world.maps import build_map
+
+    cfg = load_config(config)
+    cfg, _, _ = default_robots_max(cfg, build_map(cfg), "")
+    sim = SimLoop(cfg, seed=seed)
+    rv = cfg.rv
+    ends: list[tuple[str, np.ndarray]] = []      # (reason, where) of drives that ended done
+    flagged: set[int] = set()
+    last: dict = {}
+    passes = [0]
+
+    sync = sim.coord.sync
+    add_status = sync.add_status
+
+    def on_status(st):
+        if st.task_state == "done" and st.reason in ORIGINS:
+            ids, pos, _ = sim.physics.state()
+            k = list(ids).index(st.robot) if st.robot in ids else -1
+            if k >= 0:
+                ends.append((st.reason, np.asarray(pos[k][:2], float)))
+        return add_status(st)
+
+    sync.add_status = on_status
+    find = red.find_redundant
+
+    def observed(cx, fence, certificate=None, protected=()):
+        r = find(cx, fence, certificate, protected=protected)
+        passes[0] += 1
+        flagged.update(r.removed)
+        if r.certificate.certified:
+            last.update(cx=cx, fence=fence, cert=r.certificate, protected=set(protected))
+        return r
+
+    red.find_redundant = observed
+    t0 = time.monotonic()
+    try:
+        res = sim.run(max_sim_s=20000.0, max_wall_s=timeout)
+    finally:
+        red.find_redundant = find
+    cx = res.final
+    occ = {v: r for v, r in zip(cx.vertices, cx.occupants) if r >= 0 and r in res.positions}
+    pos = {v: np.asarray(res.positions[r][:2], float) for v, r in occ.items()}
+    V = list(pos)
+    P = np.array([pos[v] for v in V])
+    clear = sim.wm.clearance(P)
+    wall = {v: bool(c < WALL_RV * rv) for v, c in zip(V, clear)}
+    by = {"ii": [], "wi": [], "ww": []}
+    for a, b in zip(cx.edges[0::2], cx.edges[1::2]):
+        if a in pos and b in pos:
+            k = "ww" if wall[a] and wall[b] else ("wi" if wall[a] or wall[b] else "ii")
+            by[k].append(float(np.hypot(*(pos[a] - pos[b]))))
+    D = np.hypot(P[:, None, 0] - P[None, :, 0], P[:, None, 1] - P[None, :, 1])
+    np.fill_diagonal(D, np.inf)
+    nn = D.min(axis=1) / rv
+    wmask = np.array([wall[v] for v in V])
+    origin = {k: 0 for k in (*ORIGINS, "other")}
+    for v in V:
+        if not wall[v]:
+            continue
+        best = min(((float(np.hypot(*(w - pos[v]))), why) for why, w in ends), default=None)
+        origin[best[1] if best is not None and best[0] <= MATCH_M else "other"] += 1
+    d0 = sim.ccfg.d0
+    wall_row = sum(max(3, math.ceil(length / d0)) for length in ring_lengths(sim.wm))
+    extra = (global_extra(last["cx"], last["fence"], last["cert"], last["protected"])
+             if last else None)
+    return {
+        "name": cfg.name, "seed": seed, "certified": bool(res.certified), "robots": len(V),
+        "wall_vertices": int(wmask.sum()), "interior_vertices": int((~wmask).sum()),
+        "wall_row_at_d0": wall_row, "d0_rv": round(d0 / rv, 3),
+        "nn_wall_median_rv": round(float(np.median(nn[wmask])), 3) if wmask.any() else None,
+        "nn_interior_median_rv": round(float(np.median(nn[~wmask])), 3) if (~wmask).any() else None,
+        "edges": {k: _stats(v, rv) for k, v in by.items()},
+        "wall_origin": origin,
+        "redundant_over_run": len(flagged), "redundancy_passes": passes[0],
+        "global_greedy_extra": None if extra is None else len(extra),
+        "wall_s": round(time.monotonic() - t0, 1),
+    }
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("configs", nargs="*")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0])
+    ap.add_argument("--timeout", type=float, default=3000.0, help="wall seconds per run")
+    a = ap.parse_args(argv)
+    configs = a.configs or sorted(str(p) for p in (ROOT / "configs").glob("*.toml")
+                                  if p.name != "mixed.toml")
+    runs = []
+    for k, (c, s) in enumerate([(c, s) for c in configs for s in a.seeds]):
+        eprint(f"[{k + 1}/{len(configs) * len(a.seeds)}] {Path(c).stem} seed {s} ...")
+        runs.append(run(c, s, a.timeout))
+    print("| config | seed | robots | wall / row at d0 | interior | nn wall / interior (rv) "
+          "| ww edges mean, short | wall origin wall/opening/room/other | redundant over run "
+          "| global extra |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for r in runs:
+        ww, o = r["edges"]["ww"], r["wall_origin"]
+        print(f"| {r['name']} | {r['seed']} | {r['robots']} | {r['wall_vertices']} / "
+              f"{r['wall_row_at_d0']} | {r['interior_vertices']} | {r['nn_wall_median_rv']} / "
+              f"{r['nn_interior_median_rv']} | {ww.get('mean')}, {ww.get('short', 0)} of "
+              f"{ww['n']} | {o['wall']}/{o['opening']}/{o['room']}/{o['other']} | "
+              f"{r['redundant_over_run']} ({r['redundancy_passes']} passes) | "
+              f"{r['global_greedy_extra']} |")
+    print(json.dumps({"bench": "robots", "runs": runs}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
