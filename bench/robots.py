@@ -13,6 +13,8 @@ looks at the swarm it certifies, with the world's ground truth:
   bus): the last test drive that ended done near where it stands (within 0.2 m) with
   reason ``wall`` (a touch far enough out: the robot kept there), ``opening`` or ``room``
   (a wall sweep's: agents/sweep.py); ``other`` when none did (lattice deploys, pushes).
+* **spawned**: robots the run started; those not in the final swarm were sent away
+  (redundant at the end, or cut off from every source) or failed.
 * **redundancy** (spec 5.3-5.4): the distinct vertices the coordinator's local link test
   called redundant over the run (each then started a push instead of a new robot), the
   passes, and what the spec's global greedy (remove a robot off the fence while
@@ -170,6 +172,7 @@ def run(config: str, seed: int, timeout: float) -> dict:
              if last else None)
     return {
         "name": cfg.name, "seed": seed, "certified": bool(res.certified), "robots": len(V),
+        "robots_spawned": int(res.robots_spawned),
         "wall_vertices": int(wmask.sum()), "interior_vertices": int((~wmask).sum()),
         "wall_row_at_d0": wall_row, "d0_rv": round(d0 / rv, 3),
         "nn_wall_median_rv": round(float(np.median(nn[wmask])), 3) if wmask.any() else None,
@@ -194,13 +197,13 @@ def main(argv=None) -> int:
     for k, (c, s) in enumerate([(c, s) for c in configs for s in a.seeds]):
         eprint(f"[{k + 1}/{len(configs) * len(a.seeds)}] {Path(c).stem} seed {s} ...")
         runs.append(run(c, s, a.timeout))
-    print("| config | seed | robots | wall / row at d0 | interior | nn wall / interior (rv) "
+    print("| config | seed | robots (spawned) | wall / row at d0 | interior | nn wall / interior (rv) "
           "| ww edges mean, short | wall origin wall/opening/room/other | redundant over run "
           "| global extra |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for r in runs:
         ww, o = r["edges"]["ww"], r["wall_origin"]
-        print(f"| {r['name']} | {r['seed']} | {r['robots']} | {r['wall_vertices']} / "
+        print(f"| {r['name']} | {r['seed']} | {r['robots']} ({r['robots_spawned']}) | {r['wall_vertices']} / "
               f"{r['wall_row_at_d0']} | {r['interior_vertices']} | {r['nn_wall_median_rv']} / "
               f"{r['nn_interior_median_rv']} | {ww.get('mean')}, {ww.get('short', 0)} of "
               f"{ww['n']} | {o['wall']}/{o['opening']}/{o['room']}/{o['other']} | "
