@@ -102,6 +102,10 @@ class Behaviour:
         self.end_reason = ""            # deploy: why its motion ended (stalled, blocked)
         self.return_goal: dict[int, float] | None = None  # test drive: re-home after reversing
         self.return_reason = "touch"    # test drive: the failure reason once back home
+        # a probe's open-loop approach leg, reversed: (direction, distance, speed) to drive
+        # back before homing on the vertex (two landmarks in line with the vertex fix no
+        # point along that line: homing on them alone stops wherever it starts)
+        self.via_back: tuple[float, float, float] | None = None
         self.touch_offset = 0.0         # test drive: touch sector centre - direction driven (rad)
         self.press = False              # this tick's velocity presses into walls (a sweep)
         self.target: dict[int, float] = {}  # holding: the snapshot kept (rad, its frame)
@@ -300,6 +304,9 @@ class Behaviour:
     def _end_leg(self, mode: ModeState, r: Tick) -> None:
         """What follows a mode's outcome other than running on (see :class:`Outcome`)."""
         phase = self.phase
+        if phase is Phase.VIA and isinstance(mode, Open):
+            self.via_back = (wrap(mode.leg.direction + PI), mode.travelled(self.see),
+                             mode.leg.speed)
         match r.outcome:
             case Outcome.HELD:
                 self._mode = r.next
@@ -365,6 +372,7 @@ class Behaviour:
         self.progress = 0.0
         self.phase = Phase.NONE
         self.end_reason = ""
+        self.via_back = None
         self._set_task_state(TaskState.RUNNING)
         self.frame = self._task_frame(task)
         kind = task.kind
@@ -485,7 +493,13 @@ class Behaviour:
 
     def _home_back(self, goal: dict[int, float] | None) -> None:
         """Home back to the vertex on ``goal`` if enough of it is in view, else fail with
-        the return reason."""
+        the return reason. An open-loop approach leg is driven back first."""
+        if self.via_back is not None:
+            (d, dist, speed), self.via_back = self.via_back, None
+            if dist > 0.0:
+                self.return_goal = goal
+                self._enter_open(d, dist, speed, Phase.RETURN)
+                return
         if goal and sum(1 for l in goal if l in self.see.seen) >= min(2, len(goal)):
             self._enter_home(goal, Phase.RETURN)
         else:

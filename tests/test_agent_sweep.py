@@ -214,3 +214,22 @@ def test_a_robot_in_the_way_stops_the_sweep_short():
     hi, lo = parse_sweep_reason(beh.reason)
     assert lo == -math.inf and hi < 0.45 / D0
     assert _local(trace, rot)[:, 0].max() < 0.45 - 2 * R + 0.01
+
+
+def test_a_probe_that_touches_drives_its_approach_back_before_homing():
+    """A probe's open-loop approach along its edge (one via landmark) that then touches
+    the wall drives both legs back before homing on its vertex. Its vertex's landmarks
+    here (robots 5 and 1 either side, a single-file corridor) are in line with it: homing
+    on them alone stops anywhere on that line, and the robot used to stay where the
+    approach had taken it (corridor_doors: 1.05 m off its vertex after three probes, which
+    cut six robots off the source)."""
+    wm, pts, rot = _scene(None)
+    pts = {k: pts[k] for k in (0, 1, 5)}
+    task = Task(task_id=1, robot=0, kind="test_drive", vertex=0, landmarks=[1, 5],
+                bearings=[0.0, math.pi], direction=-math.pi / 2, distance=0.75,
+                keep_after=0.0, timeout_s=80.0, via_landmarks=[1], via_bearings=[0.0],
+                via_distance=0.45).validate()
+    beh, trace, modes = _run(wm, pts, task)
+    assert beh.task_state == "failed" and beh.reason == "touch"
+    assert _local(trace, rot)[:, 0].max() > 0.4          # it did go along the edge
+    assert math.dist(trace[-1], pts[0]) < 0.05
