@@ -33,7 +33,9 @@ least a body wide: a narrower gap stops the body on its far side, a turn into a 
 jagged or bending wall, a niche or a box's corner turn it back as far as forward, or less.
 Into an opening the robot drives on along the normal of the wall whose end it went round
 (through a door: straight through the wall) until it is ``sweep_depth`` from the edge, or
-a touch blocks it, and stays there as a new robot (a clear probe).
+a touch blocks it, and stays there as a new robot (a clear probe). It stays in sight of its
+vertex's landmarks: with none in view it backs out until one is, and a little farther (a
+robot that sees nobody is cut off from every source, and the coordinator sends it away).
 
 Phase 1 goes towards the edge's other end until it crosses the edge's perpendicular at
 ``sweep_far``; phase 2 back past the vertex until it crosses the ray ``sweep_stop`` beyond
@@ -56,6 +58,10 @@ _MIN_SPREAD = 1.0 - math.cos(math.radians(30.0))
 _BLEND = 0.3
 # turns round a wall's end (since the last turn into a wall) that make an opening
 OPEN_TURN = 3.0 * PI / 4.0
+# into an opening: none of the vertex's landmarks in view for this many ticks is sight
+# lost; backing out, the robot goes this much farther (x rv) once one is in view again
+LOST_TICKS = 3
+BACK_OFF = 0.1
 
 
 def locate(bearings: Mapping[int, float], points: Mapping[int, tuple[float, float]]
@@ -150,6 +156,10 @@ class Sweep(ModeState):
         self.turned = 0.0                    # turned round a wall's end (rad)
         self.n0 = self.n                     # the normal of the wall it goes round (rad)
         self.into: float | None = None       # an opening found: driving into it (rad)
+        self.keep = {int(l) for l in (*task.landmarks, *task.sweep_landmarks)}
+        self.unseen = 0                      # ticks in the opening with none of keep in view
+        self.back_at: float | None = None    # travel into the opening when sight was lost (m)
+        self.seen_at: float | None = None    # backing out: travel back when sight came back (m)
         self.travelled = 0.0                 # travel in this phase (m)
         self.mark = see.advance
         self.v = (0.0, 0.0)                  # last command (reference frame, m/s)
@@ -188,13 +198,34 @@ class Sweep(ModeState):
     def _drive_into(self, ctx: Context, psi: float) -> Tick:
         """Into an opening along ``into``: done "opening" (the robot stays there) at
         ``depth`` from the edge or after that far, or when a touch sector, a wall's or a
-        robot's, blocks the way."""
+        robot's, blocks the way. It must stay in sight of the swarm (a robot that sees none
+        of its vertex's landmarks is cut off from every source and sent away): once none
+        of them has been in view for LOST_TICKS ticks it backs out along the way it came
+        until one is, then BACK_OFF farther, and stays there."""
         p, see, g = ctx.p, ctx.see, self.geom
+        speed = p.test_drive_speed_frac * p.v_max
+        in_sight = any(l in see.seen for l in self.keep)
+        self.unseen = 0 if in_sight else self.unseen + 1
+        if self.back_at is not None:
+            went = self.travelled - self.back_at            # backed out so far (m)
+            if self.seen_at is None and in_sight:
+                self.seen_at = went
+            if (went >= self.back_at
+                    or (self.seen_at is not None and went >= self.seen_at + BACK_OFF * p.rv)):
+                return Tick(outcome=Outcome.DONE, reason="opening")
+            d = wrap(self.into + PI)
+            body = wrap(d + psi)
+            if any(blocks(body, c, p.tau) for c in (*see.obst, *see.bump)):
+                return Tick(outcome=Outcome.DONE, reason="opening")
+            self.v = (speed * math.cos(d), speed * math.sin(d))
+            return Tick(speed * math.cos(body), speed * math.sin(body), intent=body)
+        if self.unseen >= LOST_TICKS and self.travelled > 0.0:
+            self.back_at, self.seen_at = self.travelled, None
+            return Tick()
         body = wrap(self.into + psi)
         if (g.depth_of(self.R) >= g.depth or self.travelled >= g.depth
                 or any(blocks(body, c, p.tau) for c in (*see.obst, *see.bump))):
             return Tick(outcome=Outcome.DONE, reason="opening")
-        speed = p.test_drive_speed_frac * p.v_max
         self.v = (speed * math.cos(self.into), speed * math.sin(self.into))
         return Tick(speed * math.cos(body), speed * math.sin(body), intent=body)
 

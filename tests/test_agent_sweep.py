@@ -111,7 +111,7 @@ def _scene(door: float | None, ang: float = 0.0, others=()):
     return wm, {k: tuple(np.array(p) @ M.T) for k, p in pts.items()}, rot
 
 
-def _task(pts, rot, far=0.9, stop_deg=10.0, direction_deg=-70.0):
+def _task(pts, rot, far=0.9, stop_deg=10.0, direction_deg=-70.0, depth=0.75):
     """The sweep task the coordinator would send robot 0: landmark places from bearings
     (star_shape) at d0 per edge length, its vertex's bearings to home back on."""
     nb = {i: {j: math.atan2(q[1] - p[1], q[0] - p[0]) for j, q in pts.items()
@@ -123,7 +123,7 @@ def _task(pts, rot, far=0.9, stop_deg=10.0, direction_deg=-70.0):
                 bearings=[nb[0][k] for k in home], direction=math.radians(direction_deg) + rot,
                 distance=0.75, keep_after=0.0, timeout_s=80.0, sweep_side=-1,
                 sweep_edge=nb[0][1], sweep_far=far, sweep_stop=math.radians(stop_deg),
-                sweep_depth=0.75, sweep_landmarks=lms,
+                sweep_depth=depth, sweep_landmarks=lms,
                 sweep_points=[c * D0 for k in lms for c in shape[k]]).validate()
 
 
@@ -233,3 +233,20 @@ def test_a_probe_that_touches_drives_its_approach_back_before_homing():
     assert beh.task_state == "failed" and beh.reason == "touch"
     assert _local(trace, rot)[:, 0].max() > 0.4          # it did go along the edge
     assert math.dist(trace[-1], pts[0]) < 0.05
+
+
+def test_a_robot_in_an_opening_stays_in_sight_of_its_landmarks():
+    """Told to go 1.6 m into the room beyond a 0.3 m door, the robot passes out of every
+    landmark's sight (1 m, the jambs occlude) and backs out until one is in view again: it
+    stays in the opening, done "opening", seen by the swarm (a robot that sees none of them
+    is cut off from every source and sent away)."""
+    wm, pts, rot = _scene(0.30)
+    task = _task(pts, rot, depth=1.6)
+    beh, trace, _ = _run(wm, pts, task, ticks=3000)
+    assert beh.task_state == "done" and beh.reason == "opening"
+    x, y = _local(trace, rot)[-1]
+    assert y < 0.0                                   # beyond the wall's front face
+    keep = set(task.landmarks) | set(task.sweep_landmarks)
+    assert keep & set(beh.see.seen)
+    deepest = _local(trace, rot)[:, 1].min()
+    assert deepest < y - 0.05                        # it went deeper, then came back
