@@ -13,6 +13,9 @@ from .modes import Context, Mode, ModeState, Outcome, Phase, Tick, drive
 from .perception import Perception
 
 PI = math.pi
+# a test leg that lost sight of its vertex's landmarks backs up this much (x rv) past where
+# one came back into view
+SIGHT_MARGIN_RV = 0.1
 
 
 class BlockTimer:
@@ -42,7 +45,9 @@ class Leg:
     """An open-loop leg: ``distance`` (m) along ``direction`` (rad, in reference frame
     ``frame``; the body frame at the start without one) at ``speed`` (m/s), for ``phase``.
     ``single``: the one landmark a deploy keeps in sight (None: none); ``keep_after``: a
-    test leg touching a wall past this distance (m, 0: never) stays there."""
+    test leg touching a wall past this distance (m, 0: never) stays there; ``keep``: the
+    landmarks a test leg keeps in sight (its vertex's: at least one of them, or the new
+    robot is cut off from the swarm; empty: none)."""
     direction: float
     distance: float
     speed: float
@@ -50,6 +55,7 @@ class Leg:
     frame: FrameTracker | None = None
     single: int | None = None
     keep_after: float = 0.0
+    keep: tuple[int, ...] = ()
 
     def body_direction(self, see: Perception) -> float:
         """The leg's direction in the current body frame (rad)."""
@@ -61,7 +67,9 @@ class Open(ModeState):
 
     The test leg (phase TEST) reports a touch that blocks its direction (WALL once past
     ``keep_after``); with a ``single`` landmark, losing it for link_lost_ticks turns into
-    :class:`OpenBack`; deploy, return and via legs stop when blocked."""
+    :class:`OpenBack`, and so does a test leg losing every landmark of ``keep`` (the
+    thesis's stop when about to lose sight); deploy, return and via legs stop when
+    blocked."""
     mode = Mode.OPEN
     STOPS_WHEN_BLOCKED = frozenset({Phase.DEPLOY, Phase.RETURN, Phase.VIA})
 
@@ -96,6 +104,10 @@ class Open(ModeState):
         if leg.single is not None and see.ticks_unseen(leg.single) >= p.link_lost_ticks:
             return Tick(progress=progress, outcome=Outcome.SWITCH,
                         next=OpenBack(leg, done, see))
+        if (leg.phase is Phase.TEST and leg.keep
+                and all(see.ticks_unseen(l) >= p.link_lost_ticks for l in leg.keep)):
+            return Tick(progress=progress, outcome=Outcome.SWITCH,
+                        next=OpenBack(leg, done, see, margin=SIGHT_MARGIN_RV * p.rv))
         speed = min(leg.speed, remaining / max(see.dt, 1e-3))
         ux, uy = speed * math.cos(d), speed * math.sin(d)
         if self.timer.blocked(ctx, ux, uy, d) and leg.phase in self.STOPS_WHEN_BLOCKED:
@@ -104,19 +116,27 @@ class Open(ModeState):
 
 
 class OpenBack(ModeState):
-    """Single-landmark deploy lost its link: reverse the ``out_dist`` (m) driven out until
-    the landmark is seen again (DONE), or fail if it is not by then."""
+    """A leg lost sight of the landmarks it keeps (a single-landmark deploy's ``single``, a
+    test leg's ``keep``): reverse the ``out_dist`` (m) driven out until one is seen again
+    and ``margin`` (m) farther (DONE), or fail if none is by then."""
     mode = Mode.OPEN_BACK
 
-    def __init__(self, leg: Leg, out_dist: float, see: Perception):
+    def __init__(self, leg: Leg, out_dist: float, see: Perception, margin: float = 0.0):
         self.leg = leg
         self.out_dist = out_dist         # distance driven out (m)
         self.mark = see.advance
+        self.keep = (leg.single,) if leg.single is not None else leg.keep
+        self.margin = margin
+        self.seen_at: float | None = None   # backed up when one came back into view (m)
 
     def tick(self, ctx: Context) -> Tick:
         see, leg = ctx.see, self.leg
         back = see.advance - self.mark
-        if leg.single in see.seen and see.ticks_unseen(leg.single) == 0 and back > 0:
+        if self.seen_at is None and back > 0 and any(
+                l in see.seen and see.ticks_unseen(l) == 0 for l in self.keep):
+            self.seen_at = back
+        if self.seen_at is not None and (back >= self.seen_at + self.margin
+                                         or back >= self.out_dist):
             return Tick(outcome=Outcome.DONE, reason="link lost, backed up")
         if back >= self.out_dist:
             return Tick(outcome=Outcome.GAVE_UP, reason="lost landmarks")

@@ -250,3 +250,22 @@ def test_a_robot_in_an_opening_stays_in_sight_of_its_landmarks():
     assert keep & set(beh.see.seen)
     deepest = _local(trace, rot)[:, 1].min()
     assert deepest < y - 0.05                        # it went deeper, then came back
+
+
+def test_a_test_drive_stops_where_it_is_about_to_lose_sight_of_its_vertex():
+    """A clear test drive that would leave every landmark of its vertex out of view (robots
+    5 and 1, 0.9 m either side: both out of range 0.44 m up) backs up until one is seen
+    again and 0.1 rv farther, and stays there, done: a new robot the swarm still sees. It
+    used to drive on and stand where nobody saw it (tiny seed 1, after a sweep had brought
+    it home 0.34 m short: cut off from every source and sent away)."""
+    wm, pts, rot = _scene(None)
+    pts = {k: pts[k] for k in (0, 1, 5)}
+    task = Task(task_id=1, robot=0, kind="test_drive", vertex=0, landmarks=[1, 5],
+                bearings=[0.0, math.pi], direction=math.pi / 2, distance=0.9,
+                keep_after=0.45, timeout_s=80.0).validate()
+    beh, trace, _ = _run(wm, pts, task)
+    assert beh.task_state == "done" and beh.reason == "link lost, backed up"
+    h = _local(trace, rot)[-1][1] - Y
+    reach = math.sqrt(1.0 - D0 ** 2)                 # 0.436: both landmarks at 1 m
+    assert reach - 0.1 - 0.05 < h < reach
+    assert {1, 5} <= set(beh.see.seen)
