@@ -360,8 +360,8 @@ class Behaviour:
     def _enter_open(self, direction: float, distance: float, speed: float, phase: Phase,
                     single: int | None = None) -> None:
         self.phase = phase
-        # a test leg keeps in sight one of its vertex's landmarks in view as it starts
-        keep = (tuple(l for l in self.task.landmarks if l != self.robot and l in self.see.seen)
+        # a test leg keeps in sight one of the task's sight landmarks in view as it starts
+        keep = (tuple(l for l in self.task.sight if l != self.robot and l in self.see.seen)
                 if phase is Phase.TEST else ())
         leg = Leg(direction, distance, speed, phase, self.frame, single, self.task.keep_after,
                   keep)

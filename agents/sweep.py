@@ -156,7 +156,7 @@ class Sweep(ModeState):
         self.turned = 0.0                    # turned round a wall's end (rad)
         self.n0 = self.n                     # the normal of the wall it goes round (rad)
         self.into: float | None = None       # an opening found: driving into it (rad)
-        self.keep = {int(l) for l in (*task.landmarks, *task.sweep_landmarks)}
+        self.keep = {int(l) for l in (*task.sight, *task.sweep_landmarks)}   # static ones
         self.unseen = 0                      # ticks in the opening with none of keep in view
         self.back_at: float | None = None    # travel into the opening when sight was lost (m)
         self.seen_at: float | None = None    # backing out: travel back when sight came back (m)

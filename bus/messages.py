@@ -621,6 +621,11 @@ class Task(Message):
       ``sweep_landmarks`` (robot ids, a subset of ``landmarks``, the other end first),
       standing at ``sweep_points`` (x, y per landmark, m, reference frame, the vertex at
       the origin).
+    sight (test_drive only; default empty = none): robot ids, a subset of ``landmarks``
+      that no other push moves: the test leg keeps one of those in view at its start in
+      sight; with none of them in view it backs up until one is, then 0.1 rv farther, and
+      stays there, done with reason "link lost, backed up" (a new robot nobody sees is cut
+      off from every source).
     """
     task_id: int = f_int(0)
     robot: int = f_int(0)
@@ -646,6 +651,7 @@ class Task(Message):
     sweep_depth: float = f_float(0.0, 1e4, optional=True)
     sweep_landmarks: list = f_ints(0, optional=True)
     sweep_points: list = f_floats(-1e4, 1e4, optional=True)
+    sight: list = f_ints(0, optional=True)
 
     def _post_check(self):
         if self.ref_offsets and len(self.ref_offsets) != len(self.landmarks):

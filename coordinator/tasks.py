@@ -121,10 +121,13 @@ class TaskBuilder:
 
     def test_drive(self, spec: JobSpec, moving: set[int] = frozenset()) -> Task:
         """The test drive at f (a probe's approach first; a wall sweep's fields when
-        ``spec.sweep_far``, its landmarks off the ``moving`` vertices)."""
+        ``spec.sweep_far``, its landmarks off the ``moving`` vertices; the landmarks it
+        keeps in sight, ``sight``, off them too: two pushes side by side saw each other's
+        robot all the way out and ended cut off from the swarm, corridor_doors seed 2)."""
         f = spec.path[-1]
         lm, br = self.vertex_landmarks(f, exclude=set())
-        task = Task(kind="test_drive", vertex=f, landmarks=lm, bearings=br,
+        static, _ = self.vertex_landmarks(f, exclude=set(moving))
+        task = Task(kind="test_drive", vertex=f, landmarks=lm, bearings=br, sight=static,
                     ref_offsets=self.chained_offsets(f, lm),
                     direction=spec.direction,
                     distance=td_length(spec, self.params),
