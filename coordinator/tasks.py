@@ -122,11 +122,17 @@ class TaskBuilder:
     def test_drive(self, spec: JobSpec, moving: set[int] = frozenset()) -> Task:
         """The test drive at f (a probe's approach first; a wall sweep's fields when
         ``spec.sweep_far``, its landmarks off the ``moving`` vertices; the landmarks it
-        keeps in sight, ``sight``, off them too: two pushes side by side saw each other's
-        robot all the way out and ended cut off from the swarm, corridor_doors seed 2)."""
+        keeps in sight, ``sight``, off them too, and only when nobody refills f: two
+        pushes side by side saw each other's robot all the way out and ended cut off from
+        the swarm, corridor_doors seed 2)."""
         f = spec.path[-1]
         lm, br = self.vertex_landmarks(f, exclude=set())
-        static, _ = self.vertex_landmarks(f, exclude=set(moving))
+        # f left empty (the push starts at f itself, a redundant robot): the new robot must
+        # see f's neighbours. Otherwise the robot that refills f sees it (a clear drive
+        # from f ends less than rv from it, along a free line), and keeping f's neighbours
+        # in sight would stop drives along a corridor short.
+        left_empty = len(spec.path) == 1 and spec.enter_source is None
+        static = self.vertex_landmarks(f, exclude=set(moving))[0] if left_empty else []
         task = Task(kind="test_drive", vertex=f, landmarks=lm, bearings=br, sight=static,
                     ref_offsets=self.chained_offsets(f, lm),
                     direction=spec.direction,
