@@ -276,3 +276,26 @@ def test_rooms_behind_doors_a_robot_fits_through_are_found(seed, index, why, pro
     if probes_false:
         old = truth.run_map(case, topology={"sweep": False})
         assert old["false_certificate"], why
+
+
+def test_a_test_drive_keeps_in_sight_f_s_static_neighbours_only_when_nobody_refills_f():
+    """Task.sight: a push that starts at f itself (a redundant robot: f is left empty)
+    sends f's neighbours that no other push moves; a push whose path refills f sends
+    none (the robot refilling f sees the new one: a clear drive from f ends within rv of
+    it along a free line)."""
+    import dataclasses
+    snap = _snap()
+    spec = _sweep_spec(snap)
+    f = spec.path[-1]
+    _, dep, _, _, _ = _start(snap)
+    tasks = dep.pushes.tasks
+    alone = dataclasses.replace(spec, path=[f], enter_source=None)
+    others = {v for v in snap.nbrs[f] if v != f}
+    moved = min(others)
+    td = tasks.test_drive(alone, {moved})
+    assert set(td.sight) == {snap.occupant[v] for v in others - {moved}}
+    assert set(td.sight) <= set(td.landmarks)
+    refilled = dataclasses.replace(spec, path=[moved, f], enter_source=None)
+    assert tasks.test_drive(refilled, set()).sight == []
+    fed = dataclasses.replace(spec, path=[f], enter_source=0)
+    assert tasks.test_drive(fed, set()).sight == []
