@@ -126,7 +126,12 @@ class TaskBuilder:
         pushes side by side saw each other's robot all the way out and ended cut off from
         the swarm, corridor_doors seed 2)."""
         f = spec.path[-1]
-        lm, br = self.vertex_landmarks(f, exclude=set())
+        # home back on robots that stay put: another push's robots move meanwhile, and
+        # homing on one that moved pulled the robot off its vertex (corridor_doors seed 2:
+        # 0.52 m, then "lost landmarks", and 17 robots beyond it cut off from the source)
+        lm, br = self.vertex_landmarks(f, exclude=set(moving))
+        if len(lm) < 2:
+            lm, br = self.vertex_landmarks(f, exclude=set())
         # f left empty (the push starts at f itself, a redundant robot): the new robot must
         # see f's neighbours. Otherwise the robot that refills f sees it (a clear drive
         # from f ends less than rv from it, along a free line), and keeping f's neighbours
