@@ -622,10 +622,11 @@ class Task(Message):
       standing at ``sweep_points`` (x, y per landmark, m, reference frame, the vertex at
       the origin).
     sight (test_drive only; default empty = none): robot ids, a subset of ``landmarks``
-      that no other push moves, sent when nobody refills the vertex the robot leaves: the
-      test leg keeps one of those in view at its start in sight; with none of them in view it backs up until one is, then 0.1 rv farther, and
-      stays there, done with reason "link lost, backed up" (a new robot nobody sees is cut
-      off from every source).
+      that no other push moves, sent when nobody refills the vertex the robot leaves. The
+      test leg keeps in sight one of those in view at its start: with none of them in
+      view it backs up until one is, then 0.1 rv farther, and stays there, done with
+      reason "link lost, backed up" (a new robot nobody sees is cut off from every
+      source).
     """
     task_id: int = f_int(0)
     robot: int = f_int(0)
