@@ -13,8 +13,8 @@ from .modes import Context, Mode, ModeState, Outcome, Phase, Tick, drive
 from .perception import Perception
 
 PI = math.pi
-# a test leg that lost sight of its vertex's landmarks backs up this much (x rv) past where
-# one came back into view
+# a leg that lost sight of the landmarks it keeps backs up this much (x rv) past where one
+# came back into view (a test leg's, a sweep's opening)
 SIGHT_MARGIN_RV = 0.1
 
 
@@ -117,16 +117,19 @@ class Open(ModeState):
 
 class OpenBack(ModeState):
     """A leg lost sight of the landmarks it keeps (a single-landmark deploy's ``single``, a
-    test leg's ``keep``): reverse the ``out_dist`` (m) driven out until one is seen again
-    and ``margin`` (m) farther (DONE), or fail if none is by then."""
+    test leg's or a sweep's opening ``keep``): reverse the ``out_dist`` (m) driven out until
+    one is seen again and ``margin`` (m) farther (DONE with ``reason``), or fail if none is
+    by then (with ``stay``: DONE with ``reason`` there all the same)."""
     mode = Mode.OPEN_BACK
 
-    def __init__(self, leg: Leg, out_dist: float, see: Perception, margin: float = 0.0):
+    def __init__(self, leg: Leg, out_dist: float, see: Perception, margin: float = 0.0,
+                 reason: str = "link lost, backed up", stay: bool = False):
         self.leg = leg
         self.out_dist = out_dist         # distance driven out (m)
         self.mark = see.advance
         self.keep = (leg.single,) if leg.single is not None else leg.keep
         self.margin = margin
+        self.reason, self.stay = reason, stay
         self.seen_at: float | None = None   # backed up when one came back into view (m)
 
     def tick(self, ctx: Context) -> Tick:
@@ -137,8 +140,10 @@ class OpenBack(ModeState):
             self.seen_at = back
         if self.seen_at is not None and (back >= self.seen_at + self.margin
                                          or back >= self.out_dist):
-            return Tick(outcome=Outcome.DONE, reason="link lost, backed up")
+            return Tick(outcome=Outcome.DONE, reason=self.reason)
         if back >= self.out_dist:
+            if self.stay:
+                return Tick(outcome=Outcome.DONE, reason=self.reason)
             return Tick(outcome=Outcome.GAVE_UP, reason="lost landmarks")
         d = wrap(leg.body_direction(see) + PI)
         return drive(min(leg.speed, (self.out_dist - back) / max(see.dt, 1e-3)), d)

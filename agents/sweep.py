@@ -50,7 +50,8 @@ from typing import Mapping
 from swarmcover.bus.messages import Task, sweep_reason
 
 from .control import FrameTracker, blocks, wrap
-from .modes import Context, Mode, ModeState, Outcome, Tick
+from .modes import Context, Mode, ModeState, Outcome, Phase, Tick
+from .openloop import SIGHT_MARGIN_RV, Leg, OpenBack
 
 PI = math.pi
 # two landmarks whose bearings are closer than this to parallel do not fix a point
@@ -58,10 +59,6 @@ _MIN_SPREAD = 1.0 - math.cos(math.radians(30.0))
 _BLEND = 0.3
 # turns round a wall's end (since the last turn into a wall) that make an opening
 OPEN_TURN = 3.0 * PI / 4.0
-# into an opening: none of the vertex's landmarks in view for this many ticks is sight
-# lost; backing out, the robot goes this much farther (x rv) once one is in view again
-LOST_TICKS = 3
-BACK_OFF = 0.1
 
 
 def locate(bearings: Mapping[int, float], points: Mapping[int, tuple[float, float]]
@@ -156,10 +153,8 @@ class Sweep(ModeState):
         self.turned = 0.0                    # turned round a wall's end (rad)
         self.n0 = self.n                     # the normal of the wall it goes round (rad)
         self.into: float | None = None       # an opening found: driving into it (rad)
-        self.keep = {int(l) for l in (*task.sight, *task.sweep_landmarks)}   # static ones
-        self.unseen = 0                      # ticks in the opening with none of keep in view
-        self.back_at: float | None = None    # travel into the opening when sight was lost (m)
-        self.seen_at: float | None = None    # backing out: travel back when sight came back (m)
+        # landmarks no push moves: an opening's robot keeps one of them in view
+        self.keep = tuple(dict.fromkeys(int(l) for l in (*task.sight, *task.sweep_landmarks)))
         self.travelled = 0.0                 # travel in this phase (m)
         self.mark = see.advance
         self.v = (0.0, 0.0)                  # last command (reference frame, m/s)
@@ -200,28 +195,17 @@ class Sweep(ModeState):
         ``depth`` from the edge or after that far, or when a touch sector, a wall's or a
         robot's, blocks the way. It must stay in sight of the swarm (a robot that sees none
         of its vertex's landmarks is cut off from every source and sent away): once none
-        of them has been in view for LOST_TICKS ticks it backs out along the way it came
-        until one is, then BACK_OFF farther, and stays there."""
+        of ``keep`` has been in view for link_lost_ticks it backs out the way it came
+        (:class:`agents.openloop.OpenBack`) until one is, then SIGHT_MARGIN_RV farther, and
+        stays there, done "opening" all the same."""
         p, see, g = ctx.p, ctx.see, self.geom
         speed = p.test_drive_speed_frac * p.v_max
-        in_sight = any(l in see.seen for l in self.keep)
-        self.unseen = 0 if in_sight else self.unseen + 1
-        if self.back_at is not None:
-            went = self.travelled - self.back_at            # backed out so far (m)
-            if self.seen_at is None and in_sight:
-                self.seen_at = went
-            if (went >= self.back_at
-                    or (self.seen_at is not None and went >= self.seen_at + BACK_OFF * p.rv)):
-                return Tick(outcome=Outcome.DONE, reason="opening")
-            d = wrap(self.into + PI)
-            body = wrap(d + psi)
-            if any(blocks(body, c, p.tau) for c in (*see.obst, *see.bump)):
-                return Tick(outcome=Outcome.DONE, reason="opening")
-            self.v = (speed * math.cos(d), speed * math.sin(d))
-            return Tick(speed * math.cos(body), speed * math.sin(body), intent=body)
-        if self.unseen >= LOST_TICKS and self.travelled > 0.0:
-            self.back_at, self.seen_at = self.travelled, None
-            return Tick()
+        if (self.keep and self.travelled > 0.0
+                and all(see.ticks_unseen(l) >= p.link_lost_ticks for l in self.keep)):
+            leg = Leg(self.into, self.travelled, speed, Phase.TEST, self.frame, keep=self.keep)
+            return Tick(outcome=Outcome.SWITCH, next=OpenBack(
+                leg, self.travelled, see, margin=SIGHT_MARGIN_RV * p.rv, reason="opening",
+                stay=True))
         body = wrap(self.into + psi)
         if (g.depth_of(self.R) >= g.depth or self.travelled >= g.depth
                 or any(blocks(body, c, p.tau) for c in (*see.obst, *see.bump))):

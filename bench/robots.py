@@ -61,10 +61,8 @@ def global_extra(cx, fence, cert, protected) -> list[int]:
     zmask = 0
     for e in z.tolist():
         zmask |= 1 << int(e)
-    eid = {tuple(sorted(map(int, cx.edges[k]))): k for k in range(cx.n_edges)}
     tri = cx.triangles
-    cols = [(1 << eid[tuple(sorted((a, b)))]) | (1 << eid[tuple(sorted((a, c)))])
-            | (1 << eid[tuple(sorted((b, c)))]) for a, b, c in tri.tolist()]
+    cols = [(1 << a) | (1 << b) | (1 << c) for a, b, c in cx.tri_edges.tolist()]
     keep = np.zeros(n, bool)
     ids = [p for p in protected if p in cx] + [v for v in fence.fence_vertices if v in cx]
     if ids:

@@ -129,16 +129,17 @@ class TaskBuilder:
         # home back on robots that stay put: another push's robots move meanwhile, and
         # homing on one that moved pulled the robot off its vertex (corridor_doors seed 2:
         # 0.52 m, then "lost landmarks", and 17 robots beyond it cut off from the source)
-        lm, br = self.vertex_landmarks(f, exclude=set(moving))
-        if len(lm) < 2:
+        static, br = self.vertex_landmarks(f, exclude=set(moving))
+        lm = static
+        if len(static) < 2:
             lm, br = self.vertex_landmarks(f, exclude=set())
         # f left empty (the push starts at f itself, a redundant robot): the new robot must
         # see f's neighbours. Otherwise the robot that refills f sees it (a clear drive
         # from f ends less than rv from it, along a free line), and keeping f's neighbours
         # in sight would stop drives along a corridor short.
         left_empty = len(spec.path) == 1 and spec.enter_source is None
-        static = self.vertex_landmarks(f, exclude=set(moving))[0] if left_empty else []
-        task = Task(kind="test_drive", vertex=f, landmarks=lm, bearings=br, sight=static,
+        task = Task(kind="test_drive", vertex=f, landmarks=lm, bearings=br,
+                    sight=list(static) if left_empty else [],
                     ref_offsets=self.chained_offsets(f, lm),
                     direction=spec.direction,
                     distance=td_length(spec, self.params),
