@@ -299,3 +299,24 @@ def test_a_test_drive_keeps_in_sight_f_s_static_neighbours_only_when_nobody_refi
     assert tasks.test_drive(refilled, set()).sight == []
     fed = dataclasses.replace(spec, path=[f], enter_source=0)
     assert tasks.test_drive(fed, set()).sight == []
+
+
+def test_a_test_drive_homes_back_on_robots_no_other_push_moves():
+    """A test drive's landmarks (what it homes back on) leave out the robots of vertices
+    another push moves, when at least two others remain: homing on one that moved pulled a
+    prober 0.52 m off its vertex (corridor_doors seed 2) and cut 17 robots off. With
+    fewer than two left it keeps them all (homing needs two)."""
+    snap = _snap()
+    spec = _sweep_spec(snap)
+    f = spec.path[-1]
+    _, dep, _, _, _ = _start(snap)
+    tasks = dep.pushes.tasks
+    nbrs = sorted(v for v in snap.nbrs[f] if v != f)
+    assert len(nbrs) >= 3
+    moved = {nbrs[0]}
+    td = tasks.test_drive(spec, moved)
+    assert set(td.landmarks) == {snap.occupant[v] for v in nbrs[1:]}
+    assert len(td.bearings) == len(td.landmarks)
+    most = set(nbrs[:-1])
+    td = tasks.test_drive(spec, most)
+    assert set(td.landmarks) == {snap.occupant[v] for v in nbrs}
