@@ -199,7 +199,7 @@ class Sweep(ModeState):
         (:class:`agents.openloop.OpenBack`) until one is, then SIGHT_MARGIN_RV farther, and
         stays there, done "opening" all the same."""
         p, see, g = ctx.p, ctx.see, self.geom
-        speed = p.test_drive_speed_frac * p.v_max
+        speed = p.sweep_speed_frac * p.v_max
         if (self.keep and self.travelled > 0.0
                 and all(see.ticks_unseen(l) >= p.link_lost_ticks for l in self.keep)):
             leg = Leg(self.into, self.travelled, speed, Phase.TEST, self.frame, keep=self.keep)
@@ -278,6 +278,6 @@ class Sweep(ModeState):
             # an opening: into it along the normal of the wall it went round
             self.into, self.travelled = self.n0, 0.0
             return self._drive_into(ctx, psi)
-        speed = p.test_drive_speed_frac * p.v_max
+        speed = p.sweep_speed_frac * p.v_max
         self.v = (speed * math.cos(d), speed * math.sin(d))
         return Tick(speed * math.cos(body), speed * math.sin(body), intent=body, slide=False)

@@ -78,7 +78,9 @@ DOCS: dict[str, dict[str, tuple[str, str]]] = {
         "spawn": ("-", "bodies made at start: [{robot, source, kind, live, pose}, ...]"),
     },
     "agent": {
-        "test_drive_speed_frac": ("x v_max", "test-drive (open-loop) speed"),
+        "test_drive_speed_frac": ("x v_max", "test-drive (open-loop) speed; 1.0 saved 5-38% of "
+                                  "the simulated time but cost 0.7-5.6% more robots (tiny, "
+                                  "small, corridor_doors; 21 runs)"),
         "scale_speed_frac": ("x v_max", "scale-correction speed"),
         "stall_s": ("s", "homing whose largest bearing error has not dropped by stall_deg "
                          "within stall_s has stalled (wall, crowd)"),

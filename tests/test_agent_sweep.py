@@ -127,15 +127,16 @@ def _task(pts, rot, far=0.9, stop_deg=10.0, direction_deg=-70.0, depth=0.75):
                 sweep_points=[c * D0 for k in lms for c in shape[k]]).validate()
 
 
-def _run(wm, pts, task, ticks=1500, noise_deg=0.5, seed=0):
-    """Robot 0 runs ``task`` with the world's physics and sensors (the others hold still):
-    (behaviour, trace of robot 0's (x, y) per tick, its mode per tick)."""
+def _run(wm, pts, task, ticks=1500, noise_deg=0.5, seed=0, params=None):
+    """Robot 0 runs ``task`` with the world's physics and sensors (the others hold still),
+    with ``params`` (AgentParams(), the defaults, if None): (behaviour, trace of robot 0's
+    (x, y) per tick, its mode per tick)."""
     phys = Physics(wm, radius=R, v_max=0.5, w_max=2.0, dt=0.05)
     sens = Sensors(wm, 1.0, radius=R, noise_sigma=math.radians(noise_deg), n_touch=8,
                    skin=0.015, rng=np.random.default_rng(seed))
     for k, (x, y) in pts.items():
         phys.add(k, x, y, 0.0, "holonomic", False, exact=True)
-    beh = Behaviour(AgentParams(), 0)
+    beh = Behaviour(params or AgentParams(), 0)
     beh.on_task(task)
     trace, modes = [], []
     for tick in range(ticks):
@@ -268,3 +269,20 @@ def test_a_test_drive_stops_where_it_is_about_to_lose_sight_of_its_vertex():
     reach = math.sqrt(1.0 - D0 ** 2)                 # 0.436: both landmarks at 1 m
     assert reach - 0.1 - 0.05 < h < reach
     assert {1, 5} <= set(beh.see.seen)
+
+
+def test_the_sweep_slides_at_its_own_speed_whatever_the_test_drive_s():
+    """The drive out to the wall goes at test_drive_speed_frac, the slide along it at
+    sweep_speed_frac: the sweep's wall-end rule (sweep_lost_m without a touch) and the door
+    widths it finds were measured at half speed (at full speed it found 12 of 14 doors
+    0.18 m wide, against 14 of 14), the plain drive has no such limit."""
+    wm, pts, rot = _scene(None, 0.0)
+    p = AgentParams(test_drive_speed_frac=1.0, sweep_speed_frac=0.5)
+    beh, trace, modes = _run(wm, pts, _task(pts, rot, far=0.6), params=p)
+    assert beh.task_state == "failed", beh.reason
+    step = np.linalg.norm(np.diff(trace, axis=0), axis=1)
+    on = modes[:-1]
+    v_open = step[on == "open"][:5].max() / 0.05
+    v_sweep = np.median(step[on == "sweep"]) / 0.05
+    assert v_open > 0.45                   # the drive out at v_max = 0.5 m/s
+    assert 0.1 < v_sweep < 0.26            # the slide at half of it (pressing in: a bit less)
