@@ -10,8 +10,9 @@ complex from the bearings of true positions (``coordinator.build_complex``; who 
 is the oracle's rule, distance <= rv and a clear line of sight), the fence
 (``coordinator.detect_fence``), the pushes (``coordinator.plan_pushes``, up to 8 a cycle as the deployer's max_paths,
 from the source), and each deployment executed geometrically: the robot drives d0 = 0.9 rv
-along the deployment bearing; if its disk (radius r) touches a wall within wall_keep =
-0.45 rv of the start it is a failed test drive (fed back to the fence), a touch farther out
+along the deployment bearing; if its disk (radius r) touches a wall within the deployer's
+``[coordinator] wall_keep_rv`` of the start it is a failed test drive (fed back to the
+fence), a touch farther out
 leaves it at the wall as a new robot (touch flag and contact bearing), a clear drive places
 a new robot at d0. A probe (kind "probe", when the fence offers it) first moves
 ``via_frac`` along its edge toward the other end, then drives ``depth_rv`` rv along its
@@ -64,7 +65,6 @@ from bench.oracle import PolyMap, Raster, chain_boundary, in_boundary_span, judg
 RV = 1.0
 RADIUS = 0.06
 D0 = 0.9 * RV
-WALL_KEEP = 0.45 * RV
 N_TOUCH = 8          # touch sectors, centred on body bearings 2 pi k / N_TOUCH (the world's)
 NOISE_DEG = 0.5
 KINDS = ("rect", "L", "boxes", "clutter", "two_rooms")
@@ -280,6 +280,18 @@ class Swarm:
         return np.array(self.pos)
 
     # ------------------------------------------------------------------ motion
+    def robot_at(self, q: np.ndarray) -> float | None:
+        """World direction from ``q`` to a robot whose body a body at ``q`` would overlap
+        (centres under 2 radii apart), or None. Drives ignore robots; one ending on a robot
+        stopped on it in the world (a bump: the drive fails, nothing is placed)."""
+        if not self.pos:
+            return None
+        d = np.asarray(self.pos) - q
+        k = int(np.argmin(np.hypot(d[:, 0], d[:, 1])))
+        if math.hypot(*d[k]) >= 2.0 * RADIUS:
+            return None
+        return math.atan2(d[k][1], d[k][0]) if math.hypot(*d[k]) > 1e-12 else 0.0
+
     def drive(self, p: np.ndarray, direction: float, dist: float):
         """Drive a disk of radius RADIUS from p along ``direction`` (world, rad) up to
         ``dist``. Returns (travelled, end point, contact world direction or None)."""
@@ -349,6 +361,8 @@ def execute_sweep(sw: Swarm, dep, depth: float) -> Outcome:
     p = sw.pos[i]
     d = float(dep.bearing)
     trav, end, cdir = sw.drive(p, sw.world(i, d), depth)
+    if cdir is None and sw.robot_at(end) is not None:
+        return Outcome(i, d, dep.kind, "touch", trav, None, dep)   # a bump: no sweep
     if cdir is None:
         return Outcome(i, d, dep.kind, "clear", trav, sw.add(end), dep)
     others = np.array([q for k, q in enumerate(sw.pos) if k != i]).reshape(-1, 2)
@@ -364,8 +378,9 @@ def execute_sweep(sw: Swarm, dep, depth: float) -> Outcome:
                    trav + res.travelled, sw.add(res.pos, contact=c[0] if c else None), dep)
 
 
-def execute(sw: Swarm, dep, sweep_depth: float = 0.75 * RV) -> Outcome:
-    """Carry out one fence deployment geometrically (see the module docstring)."""
+def execute(sw: Swarm, dep, sweep_depth: float = 0.75 * RV, wall_keep: float = 0.75 * RV) -> Outcome:
+    """Carry out one fence deployment geometrically (see the module docstring); a touch
+    nearer than ``wall_keep`` (m) fails, a farther one leaves the robot at the wall."""
     i = int(dep.vertex)
     kind = getattr(dep, "kind", "edge")
     if float(getattr(dep, "sweep_far", 0.0) or 0.0) > 0.0:
@@ -387,9 +402,12 @@ def execute(sw: Swarm, dep, sweep_depth: float = 0.75 * RV) -> Outcome:
     else:
         start, depth = p, D0
     trav, end, cdir = sw.drive(start, wdir, depth)
+    bump = sw.robot_at(end)
+    if bump is not None:
+        trav, cdir = 0.0, bump           # ends on a robot: fails as a touch, placing nobody
     if cdir is None:
         return Outcome(i, float(dep.bearing), kind, "clear", trav, sw.add(end), dep)
-    if trav < WALL_KEEP:
+    if trav < wall_keep:
         # the robot feels the contact in a touch sector of its body: only the sector's
         # centre is known (within pi / N_TOUCH of the contact's direction)
         w = 2.0 * math.pi / N_TOUCH
@@ -440,15 +458,19 @@ class Feedback:
 # ---------------------------------------------------------------------------- one map
 def run_map(case: MapCase, *, per_cycle: int = 8, cap: int | None = None,
             headings: str = "zero", cell: float = 0.02, door_min_rv: float | None = None,
-            topology: dict | None = None) -> dict:
-    """Grow one map to its end with the real fence rules and judge it. door_min_rv and
-    topology (TopologyParams fields) override the defaults, for experiments."""
+            topology: dict | None = None, wall_keep_rv: float | None = None) -> dict:
+    """Grow one map to its end with the real fence rules and judge it. door_min_rv,
+    wall_keep_rv and topology (TopologyParams fields) override the defaults, for
+    experiments."""
     import dataclasses
 
     from swarmcover.coordinator import build_complex, certify, detect_fence, plan_pushes, verify_certificate
     from swarmcover.coordinator.config import CoordinatorConfig
 
     P = dataclasses.replace(CoordinatorConfig().topology(), **(topology or {}))
+    if wall_keep_rv is None:
+        wall_keep_rv = CoordinatorConfig().wall_keep_rv
+    wall_keep = wall_keep_rv * RV if wall_keep_rv > 0 else P.no_room_depth
     rng = np.random.default_rng([case.seed, case.index, 7])
     sw = Swarm(case.pm, rng, case.noise_deg, headings)
     sw.add(np.array(case.source))
@@ -476,7 +498,7 @@ def run_map(case: MapCase, *, per_cycle: int = 8, cap: int | None = None,
             v = min(fence.deployments)
             deps = [fence.deployments[v][0]]
         for dep in deps:
-            o = execute(sw, dep, P.sweep_depth)
+            o = execute(sw, dep, P.sweep_depth, wall_keep)
             fb.record(o)
             placed[o.result] += 1
             if o.new_robot is not None:
@@ -741,6 +763,8 @@ def main(argv=None) -> int:
                     help="robot body headings: zero (holonomic, parallel frames) or random")
     ap.add_argument("--door-min-rv", type=float, default=None,
                     help="[coordinator] door_min_rv for the probes (default: the config's)")
+    ap.add_argument("--wall-keep-rv", type=float, default=None,
+                    help="[coordinator] wall_keep_rv: a drive's touch nearer fails (default: the config's)")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                     help="override a coordinator.topology.params.TopologyParams field, e.g. corner_probes=true")
     a = ap.parse_args(argv)
@@ -753,7 +777,7 @@ def main(argv=None) -> int:
         low = val.strip().lower()
         topo[name.strip()] = (low == "true") if low in ("true", "false") else float(val)
     kw = {"per_cycle": a.per_cycle, "headings": a.headings, "door_min_rv": a.door_min_rv,
-          "topology": topo}
+          "topology": topo, "wall_keep_rv": a.wall_keep_rv}
     t0 = time.time()
     if a.only:
         rows = [run_index((a.seed, i, kw)) for i in a.only]
