@@ -36,11 +36,12 @@ class CoordinatorConfig:
                                    # Driving the whole spacing (d0 = rv - eps) halved the
                                    # excess robots on a 6 m x 4 m room (62-68 -> 35-40 robots,
                                    # ideal 27.7) at >= 99.4% coverage
-    wall_keep_rv: float = 0.45     # a test-drive touch closer than this (x rv) is "no room":
-                                   # the fence side becomes O and the robot returns (spec
-                                   # 3.4(iv)); a touch farther out keeps the robot there, against
-                                   # the wall, as the new vertex (a far touch says nothing about
-                                   # the ground between the edge and the wall)
+    wall_keep_rv: float = 0.0      # a test-drive touch closer than this (x rv) is "no room":
+                                   # the drive fails and the robot returns (spec 3.4(iv)); a
+                                   # touch farther out keeps the robot there, against the wall,
+                                   # as the new vertex. 0: TopologyParams.no_room_depth, the
+                                   # sweep depth (0.75 rv) with sweeps, whose evidence covers
+                                   # that strip (0.45 rv with the probe rule)
     lattice: bool = True           # new positions on one triangular lattice of spacing d0
                                    # through the source, from the swarm's bearing-only shape
                                    # estimate (holonomic swarms; README "departures"); off:
@@ -98,6 +99,10 @@ class CoordinatorConfig:
                                    # side later). Seed 0, in-process, off -> on: corridor_doors
                                    # 77 robots / 98 cycles / 1,935 s -> 75 / 85 / 1,785 s,
                                    # small 33 / 31 / 746 s -> 34 / 27 / 582 s
+    sweeps_last: bool = True       # pushes go to deployments that may leave a robot while the
+                                   # fence offers any; wall sweeps (which mostly come home) run
+                                   # beside them as free probes, and by pushes once only sweeps
+                                   # are left
     max_cycles: int = 100000
     final_recheck: bool = True     # after K is empty: redistribute redundant robots, re-certify
 
@@ -109,6 +114,12 @@ class CoordinatorConfig:
     @property
     def d0(self) -> float:
         return self.rv * (1.0 - self.eps_rv)
+
+    @property
+    def wall_keep(self) -> float:
+        """A test drive's touch nearer than this (m) fails; farther, its robot stays at the
+        wall: wall_keep_rv x rv, or TopologyParams.no_room_depth when that is 0."""
+        return self.wall_keep_rv * self.rv if self.wall_keep_rv > 0 else self.topology().no_room_depth
 
     def topology(self) -> TopologyParams:
         return TopologyParams(rv=self.rv, eps=self.eps_rv * self.rv,

@@ -276,7 +276,8 @@ class Deployer:
             test_drive=self.cfg.test_drive, next_vertex=self.next_vertex,
             lattice_spacing=self.cfg.d0 if self.cfg.lattice else None,
             evidence=evidence_kwargs(self.evidence, snap), free_probes=self.cfg.free_probes,
-            returned_probes=self.evidence.returned_probes(snap.occupant))
+            returned_probes=self.evidence.returned_probes(snap.occupant),
+            sweeps_last=self.cfg.sweeps_last)
         self.next_vertex += len(plan.jobs)
         self.redundant = set(plan.redundant)
         self.out.add(PublishComplex(self._complex_msg(plan, now, "running")))

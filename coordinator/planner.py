@@ -130,7 +130,7 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
                protected: set, max_paths: int, scale_correct: bool, test_drive: bool,
                next_vertex: int, lattice_spacing: float | None = None,
                evidence: dict | None = None, free_probes: bool = False,
-               returned_probes: frozenset = frozenset()) -> CyclePlan:
+               returned_probes: frozenset = frozenset(), sweeps_last: bool = False) -> CyclePlan:
     """Decide one cycle. ``next_vertex``: the first unused vertex id (for new positions).
 
     lattice_spacing: when set (rv units) and every robot is holonomic, each new position
@@ -146,6 +146,8 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     left empty). returned_probes: probe keys (coordinator.topology.evidence.probe_key) a free probe
     already drove clear and came back from: never offered as a free probe again (their side
     stays open; a push along a path may still take them, and its robot stays there).
+    sweeps_last: no push goes to a wall sweep while the fence offers anything else
+    (:func:`_placing_first`); free probes still sweep.
     certified is False whenever the fence has no one-sided edge (an empty target cycle
     proves nothing).
     previous_redundant: redundant vertices found earlier (used as path starts until the
@@ -179,14 +181,15 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
 
     # pushes: vertex-disjoint paths from redundant vertices and sources; a source may feed
     # several paths in one cycle (its new robots enter one after another)
-    paths = plan_pushes(cx, fence, snap.sources, sorted(plan.redundant), params=params,
+    push_fence = _placing_first(fence) if sweeps_last else fence
+    paths = plan_pushes(cx, push_fence, snap.sources, sorted(plan.redundant), params=params,
                         max_paths=max_paths)
     chosen = list(paths)
     while len(chosen) < max_paths and snap.sources:
         used = _claimed(cx, [pth.vertices for pth in chosen])
         extra = None
         for s in snap.sources:
-            cand = plan_pushes(cx, fence, [s], (), params=params, max_paths=1,
+            cand = plan_pushes(cx, push_fence, [s], (), params=params, max_paths=1,
                                exclude=used - {s})
             if cand and cand[0].frontier not in used:
                 extra = cand[0]
@@ -211,6 +214,16 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     if lattice_spacing and plan.jobs:
         _place_on_lattice(snap, plan.jobs, float(lattice_spacing), params, test_drive_failures)
     return plan
+
+
+def _placing_first(fence):
+    """``fence`` without its wall sweeps while it offers any other deployment: pushes then
+    go where a robot may stay, and the sweeps (which mostly come home, "swept") run as free
+    probes beside them; with nothing but sweeps left, ``fence`` itself."""
+    from dataclasses import replace
+    deps = {f: tuple(d for d in lst if not d.sweep_far > 0) for f, lst in fence.deployments.items()}
+    deps = {f: lst for f, lst in deps.items() if lst}
+    return replace(fence, deployments=deps) if deps else fence
 
 
 def _without_probes(fence, skip):
@@ -269,7 +282,8 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
                 exclude: set[int], test_drive_failures: dict[int, list[float]],
                 new_vertex: int, scale_correct: bool, test_drive: bool,
                 lattice_spacing: float | None = None,
-                evidence: dict | None = None, skip_probes=frozenset()) -> JobSpec | None:
+                evidence: dict | None = None, skip_probes=frozenset(),
+                sweeps_last: bool = False) -> JobSpec | None:
     """The next-best push from ``start`` within this cycle, after a test drive touched
     (spec 3.4(iv): "choose the next-best frontier"), or None.
 
@@ -280,6 +294,7 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
     frontier vertices, are not used (their occupants are moving or about to), and a lattice
     position keeps clear of their targets. exclude: further vertices no path may use.
     skip_probes: probe keys not to offer (a free probe's retry: those it drove clear).
+    sweeps_last: as plan_cycle's.
     """
     from .topology.paths import plan_pushes
 
@@ -287,6 +302,8 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
     if start not in cx:
         return None
     fence = _without_probes(fence, skip_probes)
+    if sweeps_last:
+        fence = _placing_first(fence)
     used = set(exclude) | _claimed(cx, [job.path for job in busy])
     used.discard(start)
     found = plan_pushes(cx, fence, [start], (), params=params, max_paths=1, exclude=used)

@@ -406,7 +406,8 @@ class Pushes:
             test_drive=True, lattice_spacing=self.cfg.d0 if self.cfg.lattice else None,
             evidence=evidence_kwargs(self.evidence, snap),
             skip_probes=(self.evidence.returned_probes(snap.occupant) if job.spec.free
-                         else frozenset()))
+                         else frozenset()),
+            sweeps_last=self.cfg.sweeps_last and not job.spec.free)
         if spec is None or (job.spec.free and spec.kind != "probe"):
             return False
         spec.free = job.spec.free

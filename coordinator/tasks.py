@@ -143,7 +143,7 @@ class TaskBuilder:
                     ref_offsets=self.chained_offsets(f, lm),
                     direction=spec.direction,
                     distance=td_length(spec, self.params),
-                    keep_after=self.cfg.wall_keep_rv * self.cfg.rv,
+                    keep_after=self.cfg.wall_keep,
                     timeout_s=self.cfg.task_timeout_s)
         if spec.kind == "probe":
             # a probe's touch anywhere within its depth is evidence (the ends' disks cover

@@ -6,6 +6,7 @@ The agent's side (the sweep in the world's physics) is tests/test_agent_sweep.py
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -320,3 +321,53 @@ def test_a_test_drive_homes_back_on_robots_no_other_push_moves():
     most = set(nbrs[:-1])
     td = tasks.test_drive(spec, most)
     assert set(td.landmarks) == {snap.occupant[v] for v in nbrs}
+
+
+def test_a_plain_test_drive_fails_on_a_touch_within_the_no_room_depth():
+    """wall_keep_rv = 0: with sweeps a touch nearer than the sweep depth is no room (the
+    drive fails, its robot goes home; the sweeps then follow that wall), a farther one keeps
+    the robot at the wall; with the probe rule the no-room depth is 0.45 rv. Any other value
+    is the depth itself (0 is the default). The test drive's keep_after carries it to the
+    agent."""
+    import dataclasses
+    auto = CoordinatorConfig(wall_keep_rv=0.0)
+    assert auto.wall_keep == pytest.approx(TopologyParams().sweep_depth) == pytest.approx(
+        math.sqrt(0.9 ** 2 - 0.25))
+    assert CoordinatorConfig(wall_keep_rv=0.0, sweep=False).wall_keep == pytest.approx(0.45)
+    assert CoordinatorConfig(wall_keep_rv=0.5, rv=2.0).wall_keep == pytest.approx(1.0)
+    cfg = CoordinatorConfig()
+    assert cfg.wall_keep == auto.wall_keep
+    snap = _snap()
+    spec = dataclasses.replace(_sweep_spec(snap), kind="edge", sweep_far=0.0, via_frac=0.0)
+    _, dep, _, _, _ = _start(snap)
+    assert dep.pushes.tasks.test_drive(spec, set()).keep_after == pytest.approx(cfg.wall_keep)
+
+
+def test_with_sweeps_last_pushes_go_where_a_robot_may_stay_and_sweeps_run_free():
+    """[coordinator] sweeps_last: while the fence offers any other deployment, no push goes
+    to a wall sweep (which mostly comes home, "swept", and holds its push's movers until
+    then); the sweeps run beside the pushes as free probes, and by pushes once only sweeps
+    are left."""
+    from swarmcover.coordinator.planner import _placing_first
+    cx, ev = _candidate()
+    f = detect_fence(cx, **ev.fence_kwargs())
+    assert _sweeps(f) and any(d.sweep_far <= 0 for lst in f.deployments.values() for d in lst)
+    g = _placing_first(f)
+    assert g.deployments and not _sweeps(g)
+    only = dataclasses.replace(f, deployments={v: tuple(d for d in lst if d.sweep_far > 0)
+                                               for v, lst in f.deployments.items()
+                                               if any(d.sweep_far > 0 for d in lst)})
+    assert _placing_first(only) is only
+    # the source at an end of the candidate side: its nearest deployment is its sweep
+    snap = dataclasses.replace(_snap(), sources=[0])
+    kw = dict(cycle=1, redundancy=False, test_drive_failures={}, previous_redundant=set(),
+              protected=set(), max_paths=4, scale_correct=False, test_drive=True,
+              next_vertex=10, free_probes=True)
+    (push,) = plan_cycle(snap, TopologyParams(d_td=0.9), **kw).jobs
+    assert push.sweep_far > 0 and not push.free
+    (push,) = plan_cycle(snap, TopologyParams(d_td=0.9), sweeps_last=True, **kw).jobs
+    assert push.sweep_far <= 0 and push.kind == "edge"
+    # away from the push, the other end sweeps as a free probe
+    snap = dataclasses.replace(_snap(), sources=[5])
+    jobs = plan_cycle(snap, TopologyParams(d_td=0.9), sweeps_last=True, **kw).jobs
+    assert [j.sweep_far > 0 for j in jobs] == [False, True] and jobs[1].free

@@ -149,7 +149,7 @@ def detect_fence(
     Guarantee: with edges <= rv, for a side closed on evidence, every opening at least
     door_min_rv wide *along the edge* whose span lies within the edge's was crossed by a
     perpendicular probe line with the robot's body clear of both jambs, and that probe
-    touched within the deployer's wall_keep_rv (0.45 rv) of the edge: no such opening
+    touched within TopologyParams.no_room_depth (0.45 rv with probes) of the edge: no such opening
     exists that close. In a wall the side's robots felt (a probe's touch, an end's
     contact), at whatever angle to the edge, every opening at least
     ``evidence.tilted_door_rv`` wide (0.52 rv at the defaults) whose span along the probe

@@ -44,8 +44,8 @@ class Deployment:
       then back past ``vertex`` until it crosses the ray from ``vertex`` ``sweep_stop``
       (rad) beyond the edge's perpendicular there (away from the other end).
     A geometric harness executes a probe as: x = p + via_frac * (q - p), then drive from x
-    along the perpendicular for depth_rv * rv; a touch within the deployer's
-    wall_keep_rv sends the robot home (evidence of a wall), no touch leaves it there.
+    along the perpendicular for depth_rv * rv; a touch within the deployer's wall keep
+    (CoordinatorConfig.wall_keep) sends the robot home (evidence of a wall), no touch leaves it there.
     """
 
     vertex: int

@@ -8,7 +8,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-__all__ = ["TopologyParams"]
+__all__ = ["TopologyParams", "PROBE_NO_ROOM_RV"]
+
+PROBE_NO_ROOM_RV = 0.45   # the probe rule's no-room depth (x rv): TopologyParams.no_room_depth
 
 
 @dataclass(frozen=True)
@@ -114,6 +116,16 @@ class TopologyParams:
         cover at the middle of an edge rv long (0.75 rv at the defaults). A wall that
         recedes beyond it leaves room in front of the side: the robot stays there."""
         return math.sqrt(max(self.d0 ** 2 - 0.25 * self.rv ** 2, 0.0625 * self.rv ** 2))
+
+    @property
+    def no_room_depth(self) -> float:
+        """A test drive that touches nearer than this (rv's unit) to its vertex found no
+        room: it fails and goes home; a touch farther out leaves its robot at the wall.
+        With sweeps, :attr:`sweep_depth`: the two ends see everything that close to the
+        edge, and the sweep then follows the wall there and finds any opening in it (a wall
+        receding farther is room). With the probe rule, PROBE_NO_ROOM_RV x rv, what its
+        probe lines' guarantee was measured at."""
+        return self.sweep_depth if self.sweep else PROBE_NO_ROOM_RV * self.rv
 
     @property
     def corner_threshold(self) -> float:
