@@ -1,6 +1,6 @@
-"""What the benchmarks that start real processes share: progress on stderr, a free port,
-a process's CPU time, waiting for a line of a child's stdout, starting and stopping
-children, a router to start them against."""
+"""What the benchmarks share: progress on stderr, the in-process benches' config x seed
+loop, a free port, a process's CPU time, waiting for a line of a child's stdout, starting
+and stopping children, a router to start them against."""
 from __future__ import annotations
 
 import os
@@ -15,6 +15,28 @@ CLK = os.sysconf("SC_CLK_TCK")
 
 def eprint(*a):
     print(*a, file=sys.stderr, flush=True)
+
+
+def run_configs(description: str, run, argv=None) -> list[dict]:
+    """Parse ``configs... [--seeds ...] [--timeout S]`` (every config in configs/ but
+    mixed.toml when none is named) and return ``run(config, seed, timeout)`` for each pair,
+    with progress on stderr."""
+    import argparse
+    from pathlib import Path
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("configs", nargs="*")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0])
+    ap.add_argument("--timeout", type=float, default=3000.0, help="wall seconds per run")
+    a = ap.parse_args(argv)
+    root = Path(__file__).resolve().parents[1]
+    configs = a.configs or sorted(str(p) for p in (root / "configs").glob("*.toml")
+                                  if p.name != "mixed.toml")
+    pairs = [(c, s) for c in configs for s in a.seeds]
+    runs = []
+    for k, (c, s) in enumerate(pairs):
+        eprint(f"[{k + 1}/{len(pairs)}] {Path(c).stem} seed {s} ...")
+        runs.append(run(c, s, a.timeout))
+    return runs
 
 
 def free_port() -> int:

@@ -29,7 +29,6 @@ The redundancy numbers come from wrapping coordinator.topology.redundancy.find_r
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
@@ -43,7 +42,7 @@ from scipy.sparse.csgraph import connected_components
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench.common import eprint  # noqa: E402
+from bench.common import run_configs  # noqa: E402
 
 WALL_RV = 0.5          # a vertex within this of a wall (x rv) is a wall vertex
 SHORT_RV = 0.6         # an edge shorter than this (x rv) is counted short
@@ -184,17 +183,7 @@ def run(config: str, seed: int, timeout: float) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("configs", nargs="*")
-    ap.add_argument("--seeds", type=int, nargs="+", default=[0])
-    ap.add_argument("--timeout", type=float, default=3000.0, help="wall seconds per run")
-    a = ap.parse_args(argv)
-    configs = a.configs or sorted(str(p) for p in (ROOT / "configs").glob("*.toml")
-                                  if p.name != "mixed.toml")
-    runs = []
-    for k, (c, s) in enumerate([(c, s) for c in configs for s in a.seeds]):
-        eprint(f"[{k + 1}/{len(configs) * len(a.seeds)}] {Path(c).stem} seed {s} ...")
-        runs.append(run(c, s, a.timeout))
+    runs = run_configs(__doc__.split("\n\n")[0], run, argv)
     print("| config | seed | robots (spawned) | wall / row at d0 | interior | nn wall / interior (rv) "
           "| ww edges mean, short | wall origin wall/opening/room/other | redundant over run "
           "| global extra |")

@@ -22,7 +22,6 @@ mean duration, task sent to task over.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -31,7 +30,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench.common import eprint  # noqa: E402
+from bench.common import run_configs  # noqa: E402
 
 CLASSES = ("moves", "sweeps", "drives", "still")
 DRIVES = ("drive", "probe", "sweep")
@@ -114,17 +113,7 @@ def run(config: str, seed: int, timeout: float) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("configs", nargs="*")
-    ap.add_argument("--seeds", type=int, nargs="+", default=[0])
-    ap.add_argument("--timeout", type=float, default=3000.0, help="wall seconds per run")
-    a = ap.parse_args(argv)
-    configs = a.configs or sorted(str(p) for p in (ROOT / "configs").glob("*.toml")
-                                  if p.name != "mixed.toml")
-    runs = []
-    for k, (c, s) in enumerate([(c, s) for c in configs for s in a.seeds]):
-        eprint(f"[{k + 1}/{len(configs) * len(a.seeds)}] {Path(c).stem} seed {s} ...")
-        runs.append(run(c, s, a.timeout))
+    runs = run_configs(__doc__.split("\n\n")[0], run, argv)
     print("| config | seed | robots | cycles | sim s (per robot) | moves / sweeps / drives / still "
           "| drives: n, touch, mean s | probes: n, touch, mean s | sweeps: n, touch, mean s |")
     print("|---|---|---|---|---|---|---|---|---|")
