@@ -41,7 +41,10 @@ class CoordinatorConfig:
                                    # touch farther out keeps the robot there, against the wall,
                                    # as the new vertex. 0: TopologyParams.no_room_depth, the
                                    # sweep depth (0.75 rv) with sweeps, whose evidence covers
-                                   # that strip (0.45 rv with the probe rule)
+                                   # that strip (0.45 rv with the probe rule). 0.45 -> 0 with
+                                   # sweeps_last: tiny seeds 0-8 133 -> 113 robots, office_ros
+                                   # 112 -> 98, pillar_hall 139 -> 119, small 300 -> 310; more
+                                   # sweeps: +13-53% simulated time on the small maps
     lattice: bool = True           # new positions on one triangular lattice of spacing d0
                                    # through the source, from the swarm's bearing-only shape
                                    # estimate (holonomic swarms; README "departures"); off:
@@ -102,7 +105,9 @@ class CoordinatorConfig:
     sweeps_last: bool = True       # pushes go to deployments that may leave a robot while the
                                    # fence offers any; wall sweeps (which mostly come home) run
                                    # beside them as free probes, and by pushes once only sweeps
-                                   # are left
+                                   # are left. Off -> on (wall_keep_rv 0.45): simulated time
+                                   # -29% tiny, -20% small (seeds 0-8), -23% corridor_doors,
+                                   # -25% on the five larger configs; robots about the same
     max_cycles: int = 100000
     final_recheck: bool = True     # after K is empty: redistribute redundant robots, re-certify
 
