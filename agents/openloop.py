@@ -57,6 +57,11 @@ class Leg:
     keep_after: float = 0.0
     keep: tuple[int, ...] = ()
 
+    @property
+    def watched(self) -> tuple[int, ...]:
+        """The landmarks the leg must not lose all of: ``single``'s, else ``keep``."""
+        return (self.single,) if self.single is not None else self.keep
+
     def body_direction(self, see: Perception) -> float:
         """The leg's direction in the current body frame (rad)."""
         return wrap(self.direction + see.psi(self.frame))
@@ -101,13 +106,12 @@ class Open(ModeState):
             # tau of its centre, which the fence uses to re-drive the probe along it
             offset = min((wrap(c - d) for c in see.obst if blocks(d, c, p.tau)), key=abs)
             return Tick(progress=progress, outcome=Outcome.TOUCH, offset=offset)
-        if leg.single is not None and see.ticks_unseen(leg.single) >= p.link_lost_ticks:
+        watched = leg.watched
+        if watched and all(see.ticks_unseen(l) >= p.link_lost_ticks for l in watched):
+            # a single-landmark deploy backs up until it is in view; a test leg a margin more
+            margin = 0.0 if leg.single is not None else SIGHT_MARGIN_RV * p.rv
             return Tick(progress=progress, outcome=Outcome.SWITCH,
-                        next=OpenBack(leg, done, see))
-        if (leg.phase is Phase.TEST and leg.keep
-                and all(see.ticks_unseen(l) >= p.link_lost_ticks for l in leg.keep)):
-            return Tick(progress=progress, outcome=Outcome.SWITCH,
-                        next=OpenBack(leg, done, see, margin=SIGHT_MARGIN_RV * p.rv))
+                        next=OpenBack(leg, done, see, margin=margin))
         speed = min(leg.speed, remaining / max(see.dt, 1e-3))
         ux, uy = speed * math.cos(d), speed * math.sin(d)
         if self.timer.blocked(ctx, ux, uy, d) and leg.phase in self.STOPS_WHEN_BLOCKED:
@@ -127,7 +131,7 @@ class OpenBack(ModeState):
         self.leg = leg
         self.out_dist = out_dist         # distance driven out (m)
         self.mark = see.advance
-        self.keep = (leg.single,) if leg.single is not None else leg.keep
+        self.keep = leg.watched
         self.margin = margin
         self.reason, self.stay = reason, stay
         self.seen_at: float | None = None   # backed up when one came back into view (m)

@@ -378,9 +378,10 @@ def execute_sweep(sw: Swarm, dep, depth: float) -> Outcome:
                    trav + res.travelled, sw.add(res.pos, contact=c[0] if c else None), dep)
 
 
-def execute(sw: Swarm, dep, sweep_depth: float = 0.75 * RV, wall_keep: float = 0.75 * RV) -> Outcome:
-    """Carry out one fence deployment geometrically (see the module docstring); a touch
-    nearer than ``wall_keep`` (m) fails, a farther one leaves the robot at the wall."""
+def execute(sw: Swarm, dep, sweep_depth: float, wall_keep: float) -> Outcome:
+    """Carry out one fence deployment geometrically (see the module docstring): a sweep
+    follows its wall up to ``sweep_depth`` (m); a touch nearer than ``wall_keep`` (m)
+    fails, a farther one leaves the robot at the wall (TopologyParams.no_room_depth)."""
     i = int(dep.vertex)
     kind = getattr(dep, "kind", "edge")
     if float(getattr(dep, "sweep_far", 0.0) or 0.0) > 0.0:
@@ -468,9 +469,8 @@ def run_map(case: MapCase, *, per_cycle: int = 8, cap: int | None = None,
     from swarmcover.coordinator.config import CoordinatorConfig
 
     P = dataclasses.replace(CoordinatorConfig().topology(), **(topology or {}))
-    if wall_keep_rv is None:
-        wall_keep_rv = CoordinatorConfig().wall_keep_rv
-    wall_keep = wall_keep_rv * RV if wall_keep_rv > 0 else P.no_room_depth
+    wall_keep = P.no_room_depth(CoordinatorConfig().wall_keep_rv if wall_keep_rv is None
+                                else wall_keep_rv)
     rng = np.random.default_rng([case.seed, case.index, 7])
     sw = Swarm(case.pm, rng, case.noise_deg, headings)
     sw.add(np.array(case.source))

@@ -123,8 +123,8 @@ class CoordinatorConfig:
     @property
     def wall_keep(self) -> float:
         """A test drive's touch nearer than this (m) fails; farther, its robot stays at the
-        wall: wall_keep_rv x rv, or TopologyParams.no_room_depth when that is 0."""
-        return self.wall_keep_rv * self.rv if self.wall_keep_rv > 0 else self.topology().no_room_depth
+        wall (TopologyParams.no_room_depth)."""
+        return self.topology().no_room_depth(self.wall_keep_rv)
 
     def topology(self) -> TopologyParams:
         return TopologyParams(rv=self.rv, eps=self.eps_rv * self.rv,

@@ -117,14 +117,16 @@ class TopologyParams:
         recedes beyond it leaves room in front of the side: the robot stays there."""
         return math.sqrt(max(self.d0 ** 2 - 0.25 * self.rv ** 2, 0.0625 * self.rv ** 2))
 
-    @property
-    def no_room_depth(self) -> float:
+    def no_room_depth(self, wall_keep_rv: float = 0.0) -> float:
         """A test drive that touches nearer than this (rv's unit) to its vertex found no
         room: it fails and goes home; a touch farther out leaves its robot at the wall.
-        With sweeps, :attr:`sweep_depth`: the two ends see everything that close to the
-        edge, and the sweep then follows the wall there and finds any opening in it (a wall
-        receding farther is room). With the probe rule, PROBE_NO_ROOM_RV x rv, what its
-        probe lines' guarantee was measured at."""
+        ``wall_keep_rv`` x rv when that is > 0 (the deployer's ``[coordinator]
+        wall_keep_rv``); else with sweeps :attr:`sweep_depth` (the two ends see everything
+        that close to the edge, and the sweep then follows the wall there and finds any
+        opening in it; a wall receding farther is room), with the probe rule
+        PROBE_NO_ROOM_RV x rv, what its probe lines' guarantee was measured at."""
+        if wall_keep_rv > 0:
+            return wall_keep_rv * self.rv
         return self.sweep_depth if self.sweep else PROBE_NO_ROOM_RV * self.rv
 
     @property
