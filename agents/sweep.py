@@ -33,7 +33,13 @@ least a body wide: a narrower gap stops the body on its far side, a turn into a 
 jagged or bending wall, a niche or a box's corner turn it back as far as forward, or less.
 Into an opening the robot drives on along the normal of the wall whose end it went round
 (through a door: straight through the wall) until it is ``sweep_depth`` from the edge, or
-a touch blocks it, and stays there as a new robot (a clear probe). It stays in sight of its
+a touch blocks it, and stays there as a new robot (a clear probe). A wall's touch that
+blocks it within a body length (2 radius) is no opening when the robot has not gone round
+to the back of the wall it followed last (the normal turned back less than 135 deg since it
+last held for a body length: a bump's face or a jagged wall's step was all it went round):
+that is a turn into a wall, and the sweep goes on along it. Through a door in a wall
+followed for a body length the turn back is 135 deg, and the robot stays, whatever blocks
+it behind the door (tests/test_agent_sweep.py). It stays in sight of its
 vertex's landmarks: with none in view it backs out until one is, and a little farther (a
 robot that sees nobody is cut off from every source, and the coordinator sends it away).
 
@@ -151,6 +157,11 @@ class Sweep(ModeState):
         self.hi, self.lo = -math.inf, math.inf
         self.lost = 0.0                      # travel with no wall felt (m)
         self.turned = 0.0                    # turned round a wall's end (rad)
+        # the turn back (rad, + round a wall's end) since n last held for a body length
+        # (a wall followed, not a bump's face), and the travel since n last turned (m)
+        self.wound = 0.0
+        self.steady = 0.0
+        self.before = 0.0                    # the phase's travel before an into-drive (m)
         self.n0 = self.n                     # the normal of the wall it goes round (rad)
         self.into: float | None = None       # an opening found: driving into it (rad)
         # landmarks no push moves: an opening's robot keeps one of them in view
@@ -188,7 +199,12 @@ class Sweep(ModeState):
     def _phase_two(self) -> None:
         """Back towards the vertex: the other hand, counts from zero."""
         self.phase, self.h = 2, -self.h
-        self.lost = self.travelled = self.turned = 0.0
+        self.lost = self.travelled = self.turned = self.wound = self.steady = 0.0
+
+    def _turn(self, n: float) -> None:
+        """The wall normal becomes ``n`` (reference frame, rad)."""
+        self.wound += self.h * wrap(n - self.n)
+        self.n, self.steady = n, 0.0
 
     def _drive_into(self, ctx: Context, psi: float) -> Tick:
         """Into an opening along ``into``: done "opening" (the robot stays there) at
@@ -207,8 +223,19 @@ class Sweep(ModeState):
                 leg, self.travelled, see, margin=SIGHT_MARGIN_RV * p.rv, reason="opening",
                 stay=True))
         body = wrap(self.into + psi)
+        walls = [c for c in see.obst if blocks(body, c, p.tau)]
+        if (walls and self.travelled < 2.0 * p.radius and self.wound < OPEN_TURN - 1e-9
+                and not any(blocks(body, c, p.tau) for c in see.bump)):
+            # a wall across the way within a body length: no opening (a bump's face, a
+            # jagged wall), and the robot has not gone round to the back of the wall it
+            # followed: a turn into this wall, and the sweep goes on along it
+            self._turn(wrap(min(walls, key=lambda c: abs(wrap(c - body))) - psi))
+            self.turned = self.lost = 0.0
+            self.into, self.travelled = None, self.before + self.travelled
+            self.v = (0.0, 0.0)
+            return Tick()
         if (g.depth_of(self.R) >= g.depth or self.travelled >= g.depth
-                or any(blocks(body, c, p.tau) for c in (*see.obst, *see.bump))):
+                or walls or any(blocks(body, c, p.tau) for c in see.bump)):
             return Tick(outcome=Outcome.DONE, reason="opening")
         self.v = (speed * math.cos(self.into), speed * math.sin(self.into))
         return Tick(speed * math.cos(body), speed * math.sin(body), intent=body)
@@ -240,19 +267,24 @@ class Sweep(ModeState):
             return self._drive_into(ctx, psi)
         f = g.frac(R)
         self.hi, self.lo = max(self.hi, f), min(self.lo, f)
+        self.steady += step
+        if self.steady >= 2.0 * p.radius:
+            self.wound = 0.0                 # a wall followed a body length: the reference
         if felt:
             self.lost = 0.0
             if 90 in felt:
-                self.n, self.turned = felt[90], 0.0    # a wall across the way: a corner
+                self._turn(felt[90])         # a wall across the way: a corner
+                self.turned = 0.0
             elif 45 in felt and 0 not in felt:
-                self.n, self.turned = felt[45], 0.0    # the wall bends towards the robot
+                self._turn(felt[45])         # the wall bends towards the robot
+                self.turned = 0.0
         else:
             self.lost += step
             if self.lost >= p.sweep_lost_m:
                 # the wall ended or bent away: one sector back, round its end
                 if self.turned == 0.0:
                     self.n0 = self.n
-                self.n = wrap(self.n + self.h * 2.0 * p.tau)
+                self._turn(wrap(self.n + self.h * 2.0 * p.tau))
                 self.turned += 2.0 * p.tau
                 self.lost = 0.0
         if self.phase == 1 and f >= g.far:
@@ -276,7 +308,7 @@ class Sweep(ModeState):
             return Tick()
         if self.turned >= OPEN_TURN - 1e-9:
             # an opening: into it along the normal of the wall it went round
-            self.into, self.travelled = self.n0, 0.0
+            self.into, self.before, self.travelled = self.n0, self.travelled, 0.0
             return self._drive_into(ctx, psi)
         speed = p.sweep_speed_frac * p.v_max
         self.v = (speed * math.cos(d), speed * math.sin(d))

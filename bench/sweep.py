@@ -20,7 +20,10 @@ narrower one stops the body on its far side, a turn into a wall): the robot driv
 it along the normal of the wall whose end it went round (through a door: straight through
 the wall) until it is ``depth`` from the edge, a touch blocks it or a robot is in its way,
 and stays there as a new robot (a clear probe: its own deployments explore what lies
-beyond). A jagged or bending
+beyond); unless a wall's touch blocks it within a body length (2 r) and n turned back less
+than 135 deg since it last held for a body length (it went round a bump's face or a jagged
+wall's step, not to the back of the wall it followed): a turn into that wall, and the
+sweep goes on along it. A jagged or bending
 wall, a niche, a box's corner turn the robot back as often as forward, or less than 135.
 
 Phase 1 goes towards the edge's other end until the robot crosses the edge's perpendicular
@@ -165,16 +168,20 @@ class Sweeper:
     def _into(self, R, n: float):
         """Drive from R along n (world, rad) into an opening: until ``depth`` from the edge
         (at most that far), a touch sector blocking the way (within pi/2 - pi/N of it) or a
-        robot ahead. Returns (end point, metres)."""
+        robot ahead. Returns (end point, metres, the blocking wall sector nearest n or None
+        when a robot or nothing blocked)."""
         u = _unit(n)
         half = math.pi / 2.0 - self.w / 2.0
         went = 0.0
         while self.depth_of(R) < self.depth and went < self.depth:
-            if self.robot_ahead(R, u) or any(abs(wrap(c - n)) < half for c in self.sectors(R)):
-                break
+            if self.robot_ahead(R, u):
+                return R, went, None
+            walls = [c for c in self.sectors(R) if abs(wrap(c - n)) < half]
+            if walls:
+                return R, went, min(walls, key=lambda c: abs(wrap(c - n)))
             R = push_out(R + STEP * u, self.segs, self.r)
             went += STEP
-        return R, went
+        return R, went, None
 
     def run(self, R0, touch_dir: float, far: float, stop: float) -> SweepResult:
         """Sweep from R0, where the first drive touched a wall in world direction
@@ -193,6 +200,8 @@ class Sweeper:
                 h = -h
             lost = travelled = 0.0
             turned = 0           # 45-deg turns round a wall's end since the last one into a wall
+            wound = 0.0          # turned back (rad) since n last held for a body length
+            steady = 0.0         # travel since n last turned (m)
             while True:
                 f = self.frac(R)
                 hi, lo = max(hi, f), min(lo, f)
@@ -215,24 +224,41 @@ class Sweeper:
                     return SweepResult("swept", R, hi, lo, False, total, " ".join(why))
                 if turned >= OPEN_TURNS:
                     # an opening: into it along the normal of the wall it went round
-                    R, went = self._into(R, n0)
-                    return SweepResult("room", R, hi, lo, True, total + went)
+                    R, went, wall = self._into(R, n0)
+                    total += went
+                    if (wall is None or went >= 2.0 * self.r
+                            or wound >= OPEN_TURNS * self.w - 1e-9):
+                        return SweepResult("room", R, hi, lo, True, total)
+                    # a wall across the way within a body length, not behind the wall it
+                    # followed: no opening; a turn into this wall, and on along it
+                    travelled += went
+                    wound += h * wrap(wall - n)
+                    n, turned, lost, steady = wall, 0, 0.0, 0.0
+                    continue
                 R = push_out(R + STEP * d, self.segs, self.r)
                 travelled += STEP
                 total += STEP
+                steady += STEP
+                if steady >= 2.0 * self.r - 1e-9:
+                    wound = 0.0                    # a wall followed a body length
                 felt = {round(math.degrees(-h * wrap(c - n))): c for c in self.sectors(R)}
                 felt = {a: c for a, c in felt.items() if -45 <= a <= 90}
                 if felt:
                     lost = 0.0
                     if 90 in felt:
-                        n, turned = felt[90], 0    # a wall across the way: a concave corner
+                        # a wall across the way: a concave corner
+                        wound += h * wrap(felt[90] - n)
+                        n, turned, steady = felt[90], 0, 0.0
                     elif 45 in felt and 0 not in felt:
-                        n, turned = felt[45], 0    # the wall bends towards the robot
+                        # the wall bends towards the robot
+                        wound += h * wrap(felt[45] - n)
+                        n, turned, steady = felt[45], 0, 0.0
                 else:
                     lost += STEP
                     if lost >= LOST - 1e-9:
                         if turned == 0:
                             n0 = n                 # the wall whose end it goes round
                         n = wrap(n + h * self.w)  # the wall ended: round its end
-                        turned, lost = turned + 1, 0.0
+                        turned, lost, steady = turned + 1, 0.0, 0.0
+                        wound += self.w
         return SweepResult("swept", R, hi, lo, False, total)  # pragma: no cover

@@ -93,18 +93,23 @@ def test_star_shape_places_the_neighbours_from_bearings_alone(seed):
 
 
 # ----------------------------------------------------------------------- in the world
-def _scene(door: float | None, ang: float = 0.0, others=()):
-    """The wall (a door [0.6, 0.6 + door] in it, if any) and the swarm, turned by ``ang``
+def _scene(door: float | None, ang: float = 0.0, others=(), *, thick: float = 0.1,
+           ring=None, boxes=()):
+    """The wall (a door [0.6, 0.6 + door] in it, if any, the wall ``thick`` m thick; or the
+    boundary ``ring``), obstacles ``boxes`` (polygons) and the swarm, turned by ``ang``
     (deg) about the origin: (WorldMap, {robot: (x, y)}, rotation)."""
-    a, T = 0.6, 0.1
+    a, T = 0.6, thick
     rot = math.radians(ang)
     M = np.array([[math.cos(rot), -math.sin(rot)], [math.sin(rot), math.cos(rot)]])
-    if door is None:
+    if ring is not None:
+        pass
+    elif door is None:
         ring = [[-2, 0], [3, 0], [3, 2], [-2, 2]]
     else:
         ring = [[-2, 0], [a, 0], [a, -T], [-2, -T], [-2, -2], [3, -2], [3, -T], [a + door, -T],
                 [a + door, 0], [3, 0], [3, 2], [-2, 2]]
-    wm = WorldMap("sweep", np.array(ring, float) @ M.T, [], np.zeros((0, 3)))
+    wm = WorldMap("sweep", np.array(ring, float) @ M.T,
+                  [np.array(b, float) @ M.T for b in boxes], np.zeros((0, 3)))
     pts = {0: (0.0, Y), 1: (D0, Y), 2: (D0 / 2, Y + 0.78), 3: (-D0 / 2, Y + 0.78),
            4: (1.5 * D0, Y + 0.78), 5: (-D0, Y), 6: (2 * D0, Y), 8: (0.0, Y + 1.56)}
     pts.update(others)
@@ -199,6 +204,40 @@ def test_a_door_a_body_wide_is_an_opening_the_robot_stays_in(door, ang):
     assert beh.task_state == "done" and beh.reason == "opening"
     x, y = _local(trace, rot)[-1]
     assert 0.6 - 2 * R < x < 0.6 + door and y < 0.0
+
+
+@pytest.mark.parametrize("thick, gap", [(0.02, 0.13), (0.02, 0.2), (0.05, 0.13), (0.1, 0.16)])
+@pytest.mark.parametrize("ang", [0.0, 30.0])
+def test_a_door_with_a_wall_right_behind_it_is_still_an_opening(thick, gap, ang):
+    """Behind a 0.2 m door in a thin wall, a box leaves a corridor ``gap`` m wide (a body
+    fits) along the wall's back: the drive into the opening is blocked within a body length,
+    yet the robot went round to the back of the wall it followed (135 deg), so it stays
+    there, done "opening" (the corridor may lead to a room; its deployments explore it)."""
+    box = [[0.2, -thick - gap - 0.3], [1.4, -thick - gap - 0.3], [1.4, -thick - gap],
+           [0.2, -thick - gap]]
+    wm, pts, rot = _scene(0.2, ang, thick=thick, boxes=[box])
+    beh, trace, _ = _run(wm, pts, _task(pts, rot))
+    assert beh.task_state == "done" and beh.reason == "opening"
+    assert _local(trace, rot)[-1][1] < 0.0
+
+
+@pytest.mark.parametrize("ang", [0.0, 10.0, 40.0])
+def test_a_raster_wall_s_steps_are_swept_past(ang):
+    """A wall receding in 0.05 m steps every 0.15 m (a ROS map's raster at 0.05 m, the
+    cave's walls): the sweep goes round each step's corner and is blocked by the next step
+    within a body length; it went round no wall to its back, so that is a turn into a
+    wall, not an opening: it sweeps on and joins the edge from its vertex's ray (these
+    angles ended "opening" against the wall before the rule)."""
+    ring = [[-2, 0], [-0.6, 0]]
+    x, y = -0.6, 0.0
+    for _ in range(12):
+        x += 0.15
+        ring += [[x, y], [x, y - 0.05]]
+        y -= 0.05
+    ring += [[3, y], [3, 2], [-2, 2]]
+    wm, pts, rot = _scene(None, ang, ring=ring)
+    beh, _, _ = _run(wm, pts, _task(pts, rot, depth=0.9))
+    assert beh.task_state == "failed" and parse_sweep_reason(beh.reason)[1] == -math.inf
 
 
 def test_a_door_narrower_than_the_body_is_swept_past():

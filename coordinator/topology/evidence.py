@@ -61,7 +61,11 @@ loses (one touch sector per agents' sweep_lost_m without a touch). Going round a
 by 135 deg or more since its last turn into a wall is an OPENING at least a body wide (a
 narrower gap stops the body on its far side: a turn into a wall); the robot stays there as
 a new robot (like a clear probe: its own deployments explore what lies beyond), and so
-does one whose wall recedes beyond TopologyParams.sweep_depth. A jagged or bending wall, a
+does one whose wall recedes beyond TopologyParams.sweep_depth. Driving into an opening, a
+wall that blocks the body within its own length is a turn into a wall, not an opening,
+unless the robot went round to the back of the wall it followed (turned back 135 deg since
+its normal last held for a body length): a bump's face or a raster wall's step is then
+swept past, a door in a followed wall stays an opening whatever stands behind it. A jagged or bending wall, a
 niche, a box's corner turn it back as far as forward, or less. Measured in the world's own
 physics and touch sensors (tests/test_agent_sweep.py; robot radius r = 0.06 m, touch skin
 0.015 m, the agent's defaults): every door at least 0.18 m = 2 r + 0.06 m wide in a 0.1 m
