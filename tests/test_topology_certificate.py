@@ -788,7 +788,7 @@ def test_a_one_sided_edge_crossed_by_others_may_leave_the_target():
     """bench/truth.py seed 1 map 49 (boxes, 57 robots, 0.5 deg noise): a covered end state
     that the fold-only closure refused. Its odd vertices 18 and 43 are far apart; 31-43 is
     one-sided with one triangle, yet three edges cross it (it lies inside the union).
-    The whole zone may drop it, and certify then certifies; no closure in the narrower
+    The one-hop zone may drop it, and certify then certifies; no closure in the fold-only
     zone exists (the obstruction proves it)."""
     from swarmcover.coordinator.topology.solver import _Solver
     d, cx, eids = _end_state("truth_s1_map49_crossing.json")
@@ -800,7 +800,7 @@ def test_a_one_sided_edge_crossed_by_others_may_leave_the_target():
     assert f is None and is_cocycle(cx, np.nonzero(psi)[0])
     assert not psi[narrow].any() and (psi & zr).sum() % 2 == 1
     cert = certify(cx, fence)
-    assert cert.certified and cert.stats["closure_zone"] == "whole"
+    assert cert.certified and cert.stats["closure_zone"] == "one hop"
     assert verify_certificate(cx, cert, fence) and verify_certificate(cx, cert)
     dropped = set(raw.tolist()) - set(cert.z.tolist())
     one = [e for e in dropped if np.diff(cx.edge_triangles[0])[e] == 1]
@@ -816,3 +816,28 @@ def test_a_one_sided_edge_crossed_by_others_may_leave_the_target():
         a, b = (int(x) for x in cx.ids[cx.edges[e]])
         assert any(cross(pos[a], pos[b], pos[int(c)], pos[int(w)])
                    for c, w in cx.ids[cx.edges] if not {int(c), int(w)} & {a, b})
+
+
+def test_a_closure_may_drop_target_edges_two_hops_out_but_adds_edges_within_one():
+    """configs/cave.toml's seed-0 end state (154 robots, no frontier, 100% ground truth):
+    twenty odd vertices, each on a one-sided edge that other edges cross, paired two to
+    four hops apart. No closure within one hop exists (the obstruction proves it); dropping
+    target edges within two hops closes it. What the closure adds stays within one hop of
+    an odd vertex, so no fence gap wider than that is ever bridged."""
+    from swarmcover.coordinator.topology.solver import _Solver
+    d, cx, eids = _end_state("cave_refused.json")
+    raw = eids(d["z_raw"])
+    fence = SimpleNamespace(z_raw=raw)
+    zr = np.isin(np.arange(cx.n_edges), raw)
+    odd, one = closure_zone(cx, zr, drop_hops=1)
+    assert len(odd) == 20
+    f, psi = _Solver(cx, None, {}).closure(zr, odd, one)
+    assert f is None and is_cocycle(cx, np.nonzero(psi)[0])
+    assert not psi[one].any() and (psi & zr).sum() % 2 == 1
+    cert = certify(cx, fence)
+    assert cert.certified and cert.stats["closure_zone"] == "whole"
+    assert verify_certificate(cx, cert, fence) and verify_certificate(cx, cert)
+    z = np.isin(np.arange(cx.n_edges), cert.z)
+    added, dropped = np.nonzero(z & ~zr)[0], np.nonzero(zr & ~z)[0]
+    assert set(added.tolist()) <= set(one.tolist())
+    assert len(dropped) and not set(dropped.tolist()) <= set(one.tolist())

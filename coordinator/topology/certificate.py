@@ -3,8 +3,9 @@
 The criterion (the only one: :func:`certify` decides it, :func:`verify_certificate`
 checks it). The *target* is a set of edges z_raw: a Fence's one-sided fence edges
 (``Fence.z_raw``) or an explicit edge set. Its *closure zone* S is, for a Fence, every
-edge with both ends within one hop of an odd-degree vertex of z_raw, in z_raw or not
-(empty when z_raw is a cycle, and always empty for an explicit edge set). The target is
+edge with both ends within one hop of an odd-degree vertex of z_raw, in z_raw or not, and
+every edge of z_raw with both ends within two hops (DROP_HOPS) of one (empty when z_raw is
+a cycle, and always empty for an explicit edge set). The target is
 *certified* when z_raw is not empty and a set of triangles alpha (the chain) and a set f
 of zone edges (the closure) satisfy boundary(alpha) = z_raw + f over GF(2), with z =
 z_raw + f not empty; z is the certificate's cycle (an f edge in z_raw leaves it).
@@ -18,9 +19,8 @@ line of sight): for a point x on no edge, the number of triangles of alpha conta
 and the number of edges of z crossed by a ray from x agree mod 2 (true for one triangle,
 and summing over alpha counts each edge boundary(alpha)_e times). So every point that z
 encloses an odd number of times lies in a triangle of alpha, within rv of each of its
-three robots (README, "The topology core"). z and z_raw differ only on zone edges, within
-one hop of the odd vertices, where z_raw encloses nothing well defined (it is not a cycle
-there).
+three robots (README, "The topology core"). z and z_raw differ only on zone edges, near
+the odd vertices, where z_raw encloses nothing well defined (it is not a cycle there).
 
 Why target edges near odd vertices may leave z: Rips triangles overlap. Two triangles on
 the same side of a shared edge e (a fold, where edges cross) make e and both their outer
@@ -35,10 +35,16 @@ of alpha. What the zone cannot hide: a run claims coverage only with no frontier
 and no deployment left (coordinator.planner), and then a boundary point of the
 triangles' union lies on an edge with no triangle on its outer side, a one-sided edge
 the fence closed as an obstacle on evidence (coordinator.topology.evidence) or reported
-as inferred. certify searches the narrower zone first (only fold edges of z_raw at odd
-vertices may leave it) and the whole zone only when that finds no closure: over
-bench/truth.py seeds 0 and 1 (1,000 maps) the narrower zone refused 13 covered end
-states and the whole zone none, with the same false certificates.
+as inferred. certify searches the narrowest zone first (only fold edges of z_raw at odd
+vertices may leave it), then every edge within one hop, then the whole zone, each only
+when the narrower finds no closure: over bench/truth.py seeds 0 and 1 (1,000 maps) the
+fold-only zone refused 13 covered end states and the one-hop zone 1 (seed 0 map 58), with
+the same false certificates; the one-hop zone also refused the cave's seed-0 end state
+(tests/data/cave_refused.json: twenty odd vertices, each on a one-sided edge that other
+edges cross, paired two to four hops apart), which dropping target edges within two hops
+closes. Added edges stay within one hop: a closure that adds edges two hops out bridged a
+2.5 m gap cut in the pillar hall's fence (tests/test_run_report.py), dropping never can
+(it only moves a gap's ends apart along z_raw).
 
 How it is solved (a lower-star Morse matching, peeling and one GF(2) elimination, on the
 complex alone): :mod:`coordinator.topology.solver`.
@@ -66,6 +72,10 @@ __all__ = [
 
 _I64 = np.int64
 _EMPTY = np.zeros(0, dtype=_I64)
+# the closure zone's reach for dropping target edges: z_raw's edges with both ends within
+# this many hops of an odd vertex (edges it adds stay within one hop: a gap in the fence
+# whose ends are farther apart than two hops is never bridged)
+DROP_HOPS = 2
 
 
 def _empty() -> np.ndarray:
@@ -175,28 +185,41 @@ def _target(cx: Complex, target, where: str) -> tuple[np.ndarray, bool]:
     return m, False
 
 
-def closure_zone(cx: Complex, z_raw: np.ndarray, *, folds_only: bool = False
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def closure_zone(cx: Complex, z_raw: np.ndarray, *, folds_only: bool = False,
+                 drop_hops: int = DROP_HOPS) -> tuple[np.ndarray, np.ndarray]:
     """(odd vertices (local indices), zone edge ids) of a target edge mask: every edge with
-    both ends within one hop of an odd-degree vertex of z_raw, in z_raw (a closure may drop
-    it) or not (a closure may add it); module docstring: why.
+    both ends within one hop of an odd-degree vertex of z_raw (a closure may add it, or drop
+    it from z_raw), and z_raw's edges with both ends within ``drop_hops`` hops (the
+    criterion's: DROP_HOPS; a closure may drop them); module docstring: why.
 
     folds_only: of z_raw's edges, only the fold edges at an odd vertex (two or more
     triangles; a one-sided edge's triangles all lie on its one side, so they overlap
-    there). :func:`certify` searches this narrower zone first, so a closure drops any other
-    target edge only when no closure in the narrower zone exists."""
+    there). :func:`certify` searches this narrowest zone first, then the zone with
+    drop_hops 1, then the whole zone, so a closure drops any other target edge, or one
+    farther off, only when no closure in a narrower zone exists."""
     if not z_raw.any():
         return _EMPTY, _EMPTY
     odd = (np.bincount(cx.edges[z_raw].ravel(), minlength=cx.n) & 1).astype(bool)
     if not odd.any():
         return _EMPTY, _EMPTY
     u, v = cx.edges[:, 0], cx.edges[:, 1]
-    near = odd.copy()
-    near[v[odd[u]]] = True
-    near[u[odd[v]]] = True
+
+    def ball(hops: int) -> np.ndarray:
+        near = odd.copy()
+        for _ in range(hops):
+            step = near.copy()
+            step[v[near[u]]] = True
+            step[u[near[v]]] = True
+            near = step
+        return near
+
+    near = ball(1)
     zone = near[u] & near[v]
     if folds_only:
         zone &= ~z_raw | ((np.diff(cx.edge_triangles[0]) >= 2) & (odd[u] | odd[v]))
+    elif drop_hops > 1:
+        far = ball(drop_hops)
+        zone |= z_raw & far[u] & far[v]
     return np.nonzero(odd)[0], np.nonzero(zone)[0]
 
 
@@ -358,7 +381,8 @@ def certify(cx: Complex, fence, *, seed: int | None = None) -> Certificate:
         return _guard(cx, result(False, zr, ob=ob, hole=hole))
 
     # odd vertices (edges cross, e.g. around pillars): close z_raw inside the zone
-    # first inside the narrower zone (only fold edges may leave z_raw), then the whole zone
+    # first inside the narrowest zone (only fold edges may leave z_raw), then any edge
+    # within one hop, then the whole zone (target edges within DROP_HOPS may leave)
     narrow = closure_zone(cx, zr, folds_only=True)[1]
     hint = getattr(fence, "z_repair", None)
     in_zone = np.zeros(E, dtype=bool)
@@ -374,9 +398,12 @@ def certify(cx: Complex, fence, *, seed: int | None = None) -> Certificate:
                 stats["closure_dropped"] = int(zr[np.asarray(hint, dtype=_I64)].sum())
                 return result(True, z1, chain, closure=np.asarray(hint, dtype=_I64))
     f, psi = S.closure(zr, odd, narrow)
-    if (f is None or not (zr ^ f).any()) and len(zone) > len(narrow):
-        f, psi = S.closure(zr, odd, zone)
-        stats["closure_zone"] = "whole"
+    searched = len(narrow)
+    for name, wider in (("one hop", closure_zone(cx, zr, drop_hops=1)[1]), ("whole", zone)):
+        if (f is None or not (zr ^ f).any()) and len(wider) > searched:
+            f, psi = S.closure(zr, odd, wider)
+            searched = len(wider)
+            stats["closure_zone"] = name
     if f is not None and not (zr ^ f).any():  # a closure never certifies nothing
         stats["reason"] = "the closure empties the target"
         return result(False, zr)
