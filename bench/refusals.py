@@ -40,6 +40,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from bench import truth  # noqa: E402
+from swarmcover.coordinator.topology.certificate import hop_ball  # noqa: E402
 
 VARIANTS = ("k1", "k2", "k3", "all", "k1t", "k2t")
 
@@ -72,24 +73,16 @@ def grow(seed: int, idx: int, **kw):
 
 def khop_zone(k):
     """A closure_zone replacement: edges outside z_raw with both ends within k hops of an
-    odd vertex (k None: every edge outside z_raw). ``folds_only`` (certify's narrow first
-    zone) is ignored: every variant is one zone."""
-    def zone(cx, z_raw, folds_only=False):
+    odd vertex (k None: every edge outside z_raw). ``folds_only`` and ``drop_hops``
+    (certify's narrower zones) are ignored: every variant is one zone."""
+    def zone(cx, z_raw, folds_only=False, drop_hops=None):
         if not z_raw.any():
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         odd = (np.bincount(cx.edges[z_raw].ravel(), minlength=cx.n) & 1).astype(bool)
         if not odd.any():
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         u, v = cx.edges[:, 0], cx.edges[:, 1]
-        if k is None:
-            near = np.ones(cx.n, bool)
-        else:
-            near = odd.copy()
-            for _ in range(k):
-                nxt = near.copy()
-                nxt[v[near[u]]] = True
-                nxt[u[near[v]]] = True
-                near = nxt
+        near = np.ones(cx.n, bool) if k is None else hop_ball(cx, odd, k)
         return np.nonzero(odd)[0], np.nonzero(near[u] & near[v] & ~z_raw)[0]
     return zone
 
@@ -122,15 +115,9 @@ def certify_toggle(cx, fence, k):
 
 
 def _ball(cx, odd, k):
-    u, v = cx.edges[:, 0], cx.edges[:, 1]
-    near = np.zeros(cx.n, bool)
-    near[odd] = True
-    for _ in range(k):
-        nxt = near.copy()
-        nxt[v[near[u]]] = True
-        nxt[u[near[v]]] = True
-        near = nxt
-    return np.nonzero(near)[0]
+    seeds = np.zeros(cx.n, bool)
+    seeds[odd] = True
+    return np.nonzero(hop_ball(cx, seeds, k))[0]
 
 
 def certify_with(cx, fence, variant: str):

@@ -784,24 +784,36 @@ def test_a_closure_adds_edges_before_it_drops_an_edge_with_one_triangle():
     assert {0, 1} <= set(closure_zone(cx, target)[1].tolist())
 
 
+def _assert_no_closure_in(cx, zr, odd_zone):
+    """No closure of target mask ``zr`` within the zone exists: the solver's obstruction
+    is a cocycle that misses the zone and meets the target an odd number of times."""
+    from swarmcover.coordinator.topology.solver import _Solver
+    odd, zone = odd_zone
+    f, psi = _Solver(cx, None, {}).closure(zr, odd, zone)
+    assert f is None and is_cocycle(cx, np.nonzero(psi)[0])
+    assert not psi[zone].any() and (psi & zr).sum() % 2 == 1
+
+
+def _certified_in(cx, fence, zone: str):
+    """certify's certificate, found in the named zone and verified both ways."""
+    cert = certify(cx, fence)
+    assert cert.certified and cert.stats["closure_zone"] == zone
+    assert verify_certificate(cx, cert, fence) and verify_certificate(cx, cert)
+    return cert
+
+
 def test_a_one_sided_edge_crossed_by_others_may_leave_the_target():
     """bench/truth.py seed 1 map 49 (boxes, 57 robots, 0.5 deg noise): a covered end state
     that the fold-only closure refused. Its odd vertices 18 and 43 are far apart; 31-43 is
     one-sided with one triangle, yet three edges cross it (it lies inside the union).
     The one-hop zone may drop it, and certify then certifies; no closure in the fold-only
     zone exists (the obstruction proves it)."""
-    from swarmcover.coordinator.topology.solver import _Solver
     d, cx, eids = _end_state("truth_s1_map49_crossing.json")
     raw = eids(d["z_raw"])
     fence = SimpleNamespace(z_raw=raw, z_repair=eids(d["z_repair"]))
     zr = np.isin(np.arange(cx.n_edges), raw)
-    odd, narrow = closure_zone(cx, zr, folds_only=True)
-    f, psi = _Solver(cx, None, {}).closure(zr, odd, narrow)
-    assert f is None and is_cocycle(cx, np.nonzero(psi)[0])
-    assert not psi[narrow].any() and (psi & zr).sum() % 2 == 1
-    cert = certify(cx, fence)
-    assert cert.certified and cert.stats["closure_zone"] == "one hop"
-    assert verify_certificate(cx, cert, fence) and verify_certificate(cx, cert)
+    _assert_no_closure_in(cx, zr, closure_zone(cx, zr, folds_only=True))
+    cert = _certified_in(cx, fence, "one hop")
     dropped = set(raw.tolist()) - set(cert.z.tolist())
     one = [e for e in dropped if np.diff(cx.edge_triangles[0])[e] == 1]
     assert one
@@ -824,19 +836,14 @@ def test_a_closure_may_drop_target_edges_two_hops_out_but_adds_edges_within_one(
     four hops apart. No closure within one hop exists (the obstruction proves it); dropping
     target edges within two hops closes it. What the closure adds stays within one hop of
     an odd vertex, so no fence gap wider than that is ever bridged."""
-    from swarmcover.coordinator.topology.solver import _Solver
     d, cx, eids = _end_state("cave_refused.json")
     raw = eids(d["z_raw"])
     fence = SimpleNamespace(z_raw=raw)
     zr = np.isin(np.arange(cx.n_edges), raw)
     odd, one = closure_zone(cx, zr, drop_hops=1)
     assert len(odd) == 20
-    f, psi = _Solver(cx, None, {}).closure(zr, odd, one)
-    assert f is None and is_cocycle(cx, np.nonzero(psi)[0])
-    assert not psi[one].any() and (psi & zr).sum() % 2 == 1
-    cert = certify(cx, fence)
-    assert cert.certified and cert.stats["closure_zone"] == "whole"
-    assert verify_certificate(cx, cert, fence) and verify_certificate(cx, cert)
+    _assert_no_closure_in(cx, zr, (odd, one))
+    cert = _certified_in(cx, fence, "whole")
     z = np.isin(np.arange(cx.n_edges), cert.z)
     added, dropped = np.nonzero(z & ~zr)[0], np.nonzero(zr & ~z)[0]
     assert set(added.tolist()) <= set(one.tolist())

@@ -67,6 +67,7 @@ __all__ = [
     "is_cocycle",
     "fence_cycle",
     "closure_zone",
+    "hop_ball",
     "certificate_from_chain",
 ]
 
@@ -185,6 +186,19 @@ def _target(cx: Complex, target, where: str) -> tuple[np.ndarray, bool]:
     return m, False
 
 
+def hop_ball(cx: Complex, seeds: np.ndarray, hops: int) -> np.ndarray:
+    """Bool mask over local vertices: those within ``hops`` edges of a ``seeds`` vertex
+    (a bool mask over local vertices)."""
+    u, v = cx.edges[:, 0], cx.edges[:, 1]
+    near = np.asarray(seeds, dtype=bool).copy()
+    for _ in range(hops):
+        step = near.copy()
+        step[v[near[u]]] = True
+        step[u[near[v]]] = True
+        near = step
+    return near
+
+
 def closure_zone(cx: Complex, z_raw: np.ndarray, *, folds_only: bool = False,
                  drop_hops: int = DROP_HOPS) -> tuple[np.ndarray, np.ndarray]:
     """(odd vertices (local indices), zone edge ids) of a target edge mask: every edge with
@@ -203,22 +217,12 @@ def closure_zone(cx: Complex, z_raw: np.ndarray, *, folds_only: bool = False,
     if not odd.any():
         return _EMPTY, _EMPTY
     u, v = cx.edges[:, 0], cx.edges[:, 1]
-
-    def ball(hops: int) -> np.ndarray:
-        near = odd.copy()
-        for _ in range(hops):
-            step = near.copy()
-            step[v[near[u]]] = True
-            step[u[near[v]]] = True
-            near = step
-        return near
-
-    near = ball(1)
+    near = hop_ball(cx, odd, 1)
     zone = near[u] & near[v]
     if folds_only:
         zone &= ~z_raw | ((np.diff(cx.edge_triangles[0]) >= 2) & (odd[u] | odd[v]))
     elif drop_hops > 1:
-        far = ball(drop_hops)
+        far = hop_ball(cx, odd, drop_hops)
         zone |= z_raw & far[u] & far[v]
     return np.nonzero(odd)[0], np.nonzero(zone)[0]
 
