@@ -4,6 +4,8 @@ judged by an independent oracle (bench/oracle.py).
 Each map (seeded) is a rectangle, an L-shape, a room with boxes, a cluttered room, or two
 rooms joined by a door 0.3-1.2 rv wide; a third of the sources stand 0.3 m from a wall,
 facing it. rv = 1 m, robot radius 0.06 m, 0.5 deg Gaussian bearing noise on half the maps.
+With ``--raster M`` every map is turned 5-40 deg and drawn on a grid of M m (walls in
+steps, as a ROS map draws them: :func:`raster_map`), the same maps otherwise.
 
 The growth loop uses the system's real topology core on emulated measurements: the
 complex from the bearings of true positions (``coordinator.build_complex``; who sees whom
@@ -39,7 +41,7 @@ The oracle judges the end state:
 * algebra: the certificate's chain has boundary z, and z is (or is not) a boundary by the
   oracle's own GF(2) elimination, as certify says.
 
-Usage: python bench/truth.py [--maps 500] [--seed 0] [--jobs 1] [--out FILE.json]
+Usage: python bench/truth.py [--maps 500] [--seed 0] [--jobs 1] [--raster 0.05] [--out FILE.json]
 (with --out, each map's result also goes to FILE.json.partial.jsonl as it comes, and a
 rerun resumes from it)
 """
@@ -55,6 +57,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy import ndimage
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
@@ -126,8 +129,10 @@ def _place_rects(rng, W, H, n, lo, hi, gap, keep_out, tries=400):
     return [_rect(*r) for r in out]
 
 
-def make_map(seed: int, index: int) -> MapCase:
-    """The ``index``-th random map of campaign ``seed``."""
+def make_map(seed: int, index: int, raster: float = 0.0) -> MapCase:
+    """The ``index``-th random map of campaign ``seed``; with ``raster`` > 0 (m) the same
+    map turned by 5-40 deg about its centre (its own random stream) and drawn on a grid of
+    that cell (:func:`raster_map`): oblique walls in steps, as a ROS map draws them."""
     rng = np.random.default_rng([int(seed), int(index)])
     kind = KINDS[int(rng.choice(len(KINDS), p=KIND_P))]
     facing = bool(rng.random() < 1.0 / 3.0)
@@ -205,8 +210,70 @@ def make_map(seed: int, index: int) -> MapCase:
     pm = PolyMap(pm.outer, holes)
     if facing and abs(pm.wall_distance(np.array([src]))[0] - 0.3) > 1e-6:  # pragma: no cover
         raise RuntimeError(f"map {index}: source not 0.3 m from a wall")
+    if raster > 0.0:
+        th = math.radians(np.random.default_rng([int(seed), int(index), 7]).uniform(5.0, 40.0))
+        R = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
+        c = pm.outer.mean(axis=0)
+        turn = lambda q: (np.asarray(q, float) - c) @ R.T + c  # noqa: E731
+        src = tuple(turn(src))
+        sdir = _wrap(sdir + th)
+        pm = raster_map(PolyMap(turn(pm.outer), [turn(h) for h in pm.holes]), raster, src)
     return MapCase(kind, pm, (float(src[0]), float(src[1])), float(sdir), facing, door_w, noise,
                    index, seed)
+
+
+def raster_map(pm: PolyMap, cell: float, source) -> PolyMap:
+    """``pm`` as a ROS map would draw it: a grid of ``cell`` m whose cells are free when
+    their centre is (the free region holding ``source``, 4-connected), traced back into
+    axis-aligned polygons along the cells' sides (walls in steps of ``cell``, like
+    configs/cave.toml's). Two free cells that meet only at a corner get one of the other
+    two cells freed, so every ring is simple. The largest ring is the boundary."""
+    lo = pm.outer.min(axis=0) - 2 * cell
+    nx, ny = (np.ceil((pm.outer.max(axis=0) + 2 * cell - lo) / cell)).astype(int)
+    xs, ys = lo[0] + (np.arange(nx) + 0.5) * cell, lo[1] + (np.arange(ny) + 0.5) * cell
+    gx, gy = np.meshgrid(xs, ys)
+    free = pm.contains(np.stack([gx.ravel(), gy.ravel()], 1)).reshape(ny, nx)
+    for _ in range(100):
+        a, b, c, d = free[:-1, :-1], free[:-1, 1:], free[1:, :-1], free[1:, 1:]
+        p1, p2 = a & d & ~b & ~c, b & c & ~a & ~d
+        if not (p1.any() or p2.any()):
+            break
+        j, i = np.nonzero(p1)
+        free[j, i + 1] = True
+        j, i = np.nonzero(p2)
+        free[j, i] = True
+    lab, _ = ndimage.label(free)
+    sj, si = int((source[1] - lo[1]) // cell), int((source[0] - lo[0]) // cell)
+    free = lab == lab[sj, si]
+    # directed cell sides with the free cell on the left, as (start vertex) -> end vertex
+    nxt: dict[tuple[int, int], tuple[int, int]] = {}
+    jj, ii = np.nonzero(free)
+    for j, i in zip(jj.tolist(), ii.tolist()):
+        if j == 0 or not free[j - 1, i]:
+            nxt[(i, j)] = (i + 1, j)             # bottom side, going +x
+        if i == nx - 1 or not free[j, i + 1]:
+            nxt[(i + 1, j)] = (i + 1, j + 1)     # right side, going +y
+        if j == ny - 1 or not free[j + 1, i]:
+            nxt[(i + 1, j + 1)] = (i, j + 1)     # top side, going -x
+        if i == 0 or not free[j, i - 1]:
+            nxt[(i, j + 1)] = (i, j)             # left side, going -y
+    rings = []
+    while nxt:
+        start = next(iter(nxt))
+        loop, v = [start], nxt.pop(start)
+        while v != start:
+            loop.append(v)
+            v = nxt.pop(v)
+        pts = np.array(loop, float)
+        u, w = np.roll(pts, -1, 0) - pts, pts - np.roll(pts, 1, 0)
+        turn = np.abs(u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]) > 1e-9
+        rings.append(lo + pts[turn] * cell)
+    rings.sort(key=lambda r: -abs(_area(r)))
+    return PolyMap(rings[0], rings[1:])
+
+
+def _area(r: np.ndarray) -> float:
+    return 0.5 * float(np.dot(r[:, 0], np.roll(r[:, 1], -1)) - np.dot(r[:, 1], np.roll(r[:, 0], -1)))
 
 
 # ---------------------------------------------------------------------------- swarm
@@ -360,6 +427,10 @@ def execute_sweep(sw: Swarm, dep, depth: float) -> Outcome:
     j = b if a == i else a
     p = sw.pos[i]
     d = float(dep.bearing)
+    if np.linalg.norm(sw.pos[j] - p) < 1e-9:
+        # the edge's ends stacked on one point (raster maps, seed 0 map 10): no edge to
+        # sweep along, a touch that joins nothing (the agent's SweepGeom has no length)
+        return Outcome(i, d, dep.kind, "touch", 0.0, None, dep)
     trav, end, cdir = sw.drive(p, sw.world(i, d), depth)
     if cdir is None and sw.robot_at(end) is not None:
         return Outcome(i, d, dep.kind, "touch", trav, None, dep)   # a bump: no sweep
@@ -614,7 +685,8 @@ def _planner_claim(sw: Swarm, case: MapCase, P, fb: Feedback, reps: dict) -> boo
 
 def run_index(args) -> dict:
     seed, idx, kw = args
-    case = make_map(seed, idx)
+    kw = dict(kw)
+    case = make_map(seed, idx, kw.pop("raster", 0.0))
     try:
         return run_map(case, **kw)
     except Exception as e:  # a crash in the system under test is a finding, not the end
@@ -767,6 +839,9 @@ def main(argv=None) -> int:
                     help="[coordinator] wall_keep_rv: a drive's touch nearer fails (default: the config's)")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                     help="override a coordinator.topology.params.TopologyParams field, e.g. corner_probes=true")
+    ap.add_argument("--raster", type=float, default=0.0, metavar="M",
+                    help="turn every map 5-40 deg and draw it on a grid of M metres (walls in "
+                         "steps, as a ROS map's; e.g. 0.05, the cave's)")
     a = ap.parse_args(argv)
     if a.maps < 1 or a.jobs < 1:
         print("truth.py: --maps and --jobs must be >= 1", file=sys.stderr)
@@ -777,7 +852,7 @@ def main(argv=None) -> int:
         low = val.strip().lower()
         topo[name.strip()] = (low == "true") if low in ("true", "false") else float(val)
     kw = {"per_cycle": a.per_cycle, "headings": a.headings, "door_min_rv": a.door_min_rv,
-          "topology": topo, "wall_keep_rv": a.wall_keep_rv}
+          "topology": topo, "wall_keep_rv": a.wall_keep_rv, "raster": a.raster}
     t0 = time.time()
     if a.only:
         rows = [run_index((a.seed, i, kw)) for i in a.only]

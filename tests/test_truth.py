@@ -128,6 +128,31 @@ def test_maps_are_seeded_and_sources_face_walls():
     assert min(doors) >= 0.3 and max(doors) <= 1.2
 
 
+@pytest.mark.parametrize("index", [0, 5, 10])
+def test_raster_maps_turn_the_walls_into_steps_around_the_same_room(index):
+    """``make_map(..., raster=0.05)``: the map turned 5-40 deg and drawn on a 0.05 m grid,
+    as a ROS map draws it (the cave's walls): every wall axis-aligned, a whole number of
+    cells long, the free area within a cell's strip along the walls of the turned map's,
+    the source inside."""
+    flat, r = truth.make_map(0, index), truth.make_map(0, index, 0.05)
+    assert (r.kind, r.door_w) == (flat.kind, flat.door_w)
+    assert r.pm.contains(np.array([r.source]))[0]
+    w = r.pm.walls()
+    d = w[:, 2:] - w[:, :2]
+    assert np.all(np.min(np.abs(d), axis=1) < 1e-9)
+    cells = np.max(np.abs(d), axis=1) / 0.05
+    assert np.allclose(cells, np.round(cells)) and cells.min() >= 1 - 1e-9
+
+    def area(pm):
+        def a(q):
+            return abs(0.5 * float(np.dot(q[:, 0], np.roll(q[:, 1], -1)) - np.dot(q[:, 1], np.roll(q[:, 0], -1))))
+        return a(pm.outer) - sum(a(h) for h in pm.holes)
+
+    perimeter = float(np.linalg.norm(flat.pm.walls()[:, 2:] - flat.pm.walls()[:, :2], axis=1).sum())
+    assert abs(area(r.pm) - area(flat.pm)) < 0.05 * perimeter
+    assert not np.array_equal(truth.make_map(0, index, 0.05).pm.outer, flat.pm.outer)
+
+
 def test_the_sweep_emulation_mirrors_the_agent_and_the_world():
     """bench/sweep.py copies the agent's sweep defaults and the world's touch skin (it may
     not import them: the harness shares no geometry with agents/ or world/)."""
