@@ -201,10 +201,13 @@ class Sweep(ModeState):
         self.phase, self.h = 2, -self.h
         self.lost = self.travelled = self.turned = self.wound = self.steady = 0.0
 
-    def _turn(self, n: float) -> None:
-        """The wall normal becomes ``n`` (reference frame, rad)."""
+    def _turn(self, n: float, into_wall: bool) -> None:
+        """The wall normal becomes ``n`` (reference frame, rad); ``into_wall``: a turn into
+        a wall, which ends any count round a wall's end."""
         self.wound += self.h * wrap(n - self.n)
         self.n, self.steady = n, 0.0
+        if into_wall:
+            self.turned = 0.0
 
     def _drive_into(self, ctx: Context, psi: float) -> Tick:
         """Into an opening along ``into``: done "opening" (the robot stays there) at
@@ -224,18 +227,18 @@ class Sweep(ModeState):
                 stay=True))
         body = wrap(self.into + psi)
         walls = [c for c in see.obst if blocks(body, c, p.tau)]
-        if (walls and self.travelled < 2.0 * p.radius and self.wound < OPEN_TURN - 1e-9
-                and not any(blocks(body, c, p.tau) for c in see.bump)):
+        bumped = any(blocks(body, c, p.tau) for c in see.bump)
+        if (walls and not bumped and self.travelled < 2.0 * p.radius
+                and self.wound < OPEN_TURN - 1e-9):
             # a wall across the way within a body length: no opening (a bump's face, a
             # jagged wall), and the robot has not gone round to the back of the wall it
             # followed: a turn into this wall, and the sweep goes on along it
-            self._turn(wrap(min(walls, key=lambda c: abs(wrap(c - body))) - psi))
-            self.turned = self.lost = 0.0
+            self._turn(wrap(min(walls, key=lambda c: abs(wrap(c - body))) - psi), True)
+            self.lost = 0.0
             self.into, self.travelled = None, self.before + self.travelled
             self.v = (0.0, 0.0)
             return Tick()
-        if (g.depth_of(self.R) >= g.depth or self.travelled >= g.depth
-                or walls or any(blocks(body, c, p.tau) for c in see.bump)):
+        if (g.depth_of(self.R) >= g.depth or self.travelled >= g.depth or walls or bumped):
             return Tick(outcome=Outcome.DONE, reason="opening")
         self.v = (speed * math.cos(self.into), speed * math.sin(self.into))
         return Tick(speed * math.cos(body), speed * math.sin(body), intent=body)
@@ -273,18 +276,16 @@ class Sweep(ModeState):
         if felt:
             self.lost = 0.0
             if 90 in felt:
-                self._turn(felt[90])         # a wall across the way: a corner
-                self.turned = 0.0
+                self._turn(felt[90], True)   # a wall across the way: a corner
             elif 45 in felt and 0 not in felt:
-                self._turn(felt[45])         # the wall bends towards the robot
-                self.turned = 0.0
+                self._turn(felt[45], True)   # the wall bends towards the robot
         else:
             self.lost += step
             if self.lost >= p.sweep_lost_m:
                 # the wall ended or bent away: one sector back, round its end
                 if self.turned == 0.0:
                     self.n0 = self.n
-                self._turn(wrap(self.n + self.h * 2.0 * p.tau))
+                self._turn(wrap(self.n + self.h * 2.0 * p.tau), False)
                 self.turned += 2.0 * p.tau
                 self.lost = 0.0
         if self.phase == 1 and f >= g.far:

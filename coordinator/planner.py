@@ -216,13 +216,19 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     return plan
 
 
+def _keeping(fence, keep) -> dict:
+    """``fence``'s deployments for which ``keep`` holds, by frontier vertex (none left: the
+    vertex is dropped)."""
+    deps = {f: tuple(d for d in lst if keep(d)) for f, lst in fence.deployments.items()}
+    return {f: lst for f, lst in deps.items() if lst}
+
+
 def _placing_first(fence):
     """``fence`` without its wall sweeps while it offers any other deployment: pushes then
     go where a robot may stay, and the sweeps (which mostly come home, "swept") run as free
     probes beside them; with nothing but sweeps left, ``fence`` itself."""
     from dataclasses import replace
-    deps = {f: tuple(d for d in lst if not d.sweep_far > 0) for f, lst in fence.deployments.items()}
-    deps = {f: lst for f, lst in deps.items() if lst}
+    deps = _keeping(fence, lambda d: not d.sweep_far > 0)
     return replace(fence, deployments=deps) if deps else fence
 
 
@@ -234,13 +240,9 @@ def _without_probes(fence, skip):
     from dataclasses import replace
 
     from .topology.evidence import probe_key
-    deps = {}
-    for f, lst in fence.deployments.items():
-        lst = tuple(d for d in lst if d.kind != "probe" or d.edge is None
-                    or probe_key(d.vertex, d.edge, d.sigma, d.via_frac) not in skip)
-        if lst:
-            deps[f] = lst
-    return replace(fence, deployments=deps)
+    return replace(fence, deployments=_keeping(
+        fence, lambda d: d.kind != "probe" or d.edge is None
+        or probe_key(d.vertex, d.edge, d.sigma, d.via_frac) not in skip))
 
 
 def _add_free_probes(snap: Snapshot, params: TopologyParams, cx, fence, plan: CyclePlan,

@@ -212,13 +212,16 @@ def test_a_door_with_a_wall_right_behind_it_is_still_an_opening(thick, gap, ang)
     """Behind a 0.2 m door in a thin wall, a box leaves a corridor ``gap`` m wide (a body
     fits) along the wall's back: the drive into the opening is blocked within a body length,
     yet the robot went round to the back of the wall it followed (135 deg), so it stays
-    there, done "opening" (the corridor may lead to a room; its deployments explore it)."""
+    there, in the doorway, done "opening" (the corridor may lead to a room; its deployments
+    explore it). Taken for a wall's step, it would sweep on along the box and stop down
+    the corridor (x 0.10-0.12 m in 5 of these 8 cases)."""
     box = [[0.2, -thick - gap - 0.3], [1.4, -thick - gap - 0.3], [1.4, -thick - gap],
            [0.2, -thick - gap]]
     wm, pts, rot = _scene(0.2, ang, thick=thick, boxes=[box])
     beh, trace, _ = _run(wm, pts, _task(pts, rot))
     assert beh.task_state == "done" and beh.reason == "opening"
-    assert _local(trace, rot)[-1][1] < 0.0
+    x, y = _local(trace, rot)[-1]
+    assert 0.6 - 2 * R < x < 0.6 + 0.2 and y < 0.0
 
 
 @pytest.mark.parametrize("ang", [0.0, 10.0, 40.0])

@@ -403,8 +403,11 @@ def certify(cx: Complex, fence, *, seed: int | None = None) -> Certificate:
                 return result(True, z1, chain, closure=np.asarray(hint, dtype=_I64))
     f, psi = S.closure(zr, odd, narrow)
     searched = len(narrow)
-    for name, wider in (("one hop", closure_zone(cx, zr, drop_hops=1)[1]), ("whole", zone)):
-        if (f is None or not (zr ^ f).any()) and len(wider) > searched:
+    for name in ("one hop", "whole"):
+        if f is not None and (zr ^ f).any():
+            break
+        wider = zone if name == "whole" else closure_zone(cx, zr, drop_hops=1)[1]
+        if len(wider) > searched:
             f, psi = S.closure(zr, odd, wider)
             searched = len(wider)
             stats["closure_zone"] = name
