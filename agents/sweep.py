@@ -163,6 +163,10 @@ class Sweep(ModeState):
         self.steady = 0.0
         self.before = 0.0                    # the phase's travel before an into-drive (m)
         self.n0 = self.n                     # the normal of the wall it goes round (rad)
+        self.n0_held = False                 # that wall was followed for a body length
+        self.ref = self.n                    # the normal last held for a body length (rad)
+        self.ref_at: tuple[float, float] | None = None   # where it held ``ref`` (m)
+        self.turned_in = False               # this into-drive already turned to ``ref``
         self.into: float | None = None       # an opening found: driving into it (rad)
         # landmarks no push moves: an opening's robot keeps one of them in view
         self.keep = tuple(dict.fromkeys(int(l) for l in (*task.sight, *task.sweep_landmarks)))
@@ -200,6 +204,7 @@ class Sweep(ModeState):
         """Back towards the vertex: the other hand, counts from zero."""
         self.phase, self.h = 2, -self.h
         self.lost = self.travelled = self.turned = self.wound = self.steady = 0.0
+        self.ref, self.ref_at = self.n, self.R
 
     def _turn(self, n: float, into_wall: bool) -> None:
         """The wall normal becomes ``n`` (reference frame, rad); ``into_wall``: a turn into
@@ -238,6 +243,15 @@ class Sweep(ModeState):
             self.into, self.travelled = None, self.before + self.travelled
             self.v = (0.0, 0.0)
             return Tick()
+        if (not (walls or bumped) and self.travelled >= 2.0 * p.radius
+                and not self.turned_in and self.wound < OPEN_TURN - 1e-9):
+            # clear for a body length past a face shorter than that (a bump's), not round to
+            # the back of the wall followed last and not past it: into along that wall's
+            # normal instead (beside a bump it meets that wall, a turn into it; a door in it
+            # is driven through, and an opening all the same)
+            self.into, self.turned_in = self.ref, True
+            self.before, self.travelled = self.before + self.travelled, 0.0
+            return Tick()
         if (g.depth_of(self.R) >= g.depth or self.travelled >= g.depth or walls or bumped):
             return Tick(outcome=Outcome.DONE, reason="opening")
         self.v = (speed * math.cos(self.into), speed * math.sin(self.into))
@@ -273,6 +287,7 @@ class Sweep(ModeState):
         self.steady += step
         if self.steady >= 2.0 * p.radius:
             self.wound = 0.0                 # a wall followed a body length: the reference
+            self.ref, self.ref_at = self.n, R
         if felt:
             self.lost = 0.0
             if 90 in felt:
@@ -284,7 +299,7 @@ class Sweep(ModeState):
             if self.lost >= p.sweep_lost_m:
                 # the wall ended or bent away: one sector back, round its end
                 if self.turned == 0.0:
-                    self.n0 = self.n
+                    self.n0, self.n0_held = self.n, self.steady >= 2.0 * p.radius
                 self._turn(wrap(self.n + self.h * 2.0 * p.tau), False)
                 self.turned += 2.0 * p.tau
                 self.lost = 0.0
@@ -310,6 +325,10 @@ class Sweep(ModeState):
         if self.turned >= OPEN_TURN - 1e-9:
             # an opening: into it along the normal of the wall it went round
             self.into, self.before, self.travelled = self.n0, self.travelled, 0.0
+            # not past the wall held last (a bump's top, not through a door): may turn to it
+            self.turned_in = self.n0_held or self.ref_at is None or (
+                (R[0] - self.ref_at[0]) * math.cos(self.ref)
+                + (R[1] - self.ref_at[1]) * math.sin(self.ref) > p.radius)
             return self._drive_into(ctx, psi)
         speed = p.sweep_speed_frac * p.v_max
         self.v = (speed * math.cos(d), speed * math.sin(d))

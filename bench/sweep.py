@@ -165,7 +165,7 @@ class Sweeper:
         return "robot"
 
     # ------------------------------------------------------------------ the sweep
-    def _into(self, R, n: float):
+    def _into(self, R, n: float, limit: float = math.inf):
         """Drive from R along n (world, rad) into an opening: until ``depth`` from the edge
         (at most that far), a touch sector blocking the way (within pi/2 - pi/N of it) or a
         robot ahead. Returns (end point, metres, the blocking wall sector nearest n or None
@@ -173,7 +173,7 @@ class Sweeper:
         u = _unit(n)
         half = math.pi / 2.0 - self.w / 2.0
         went = 0.0
-        while self.depth_of(R) < self.depth and went < self.depth:
+        while self.depth_of(R) < self.depth and went < min(self.depth, limit):
             if self.robot_ahead(R, u):
                 return R, went, None
             walls = [c for c in self.sectors(R) if abs(wrap(c - n)) < half]
@@ -202,6 +202,8 @@ class Sweeper:
             turned = 0           # 45-deg turns round a wall's end since the last one into a wall
             wound = 0.0          # turned back (rad) since n last held for a body length
             steady = 0.0         # travel since n last turned (m)
+            ref, ref_at = n, R.copy()   # the normal last held for a body length, and where
+            n0_held = False      # the wall whose end it goes round was held a body length
             while True:
                 f = self.frac(R)
                 hi, lo = max(hi, f), min(lo, f)
@@ -224,8 +226,19 @@ class Sweeper:
                     return SweepResult("swept", R, hi, lo, False, total, " ".join(why))
                 if turned >= OPEN_TURNS:
                     # an opening: into it along the normal of the wall it went round
-                    R, went, wall = self._into(R, n0)
+                    # round a face shorter than a body length, not to the back of the wall
+                    # held last and not past it (a bump's top, not through a door)
+                    short = (not n0_held and wound < OPEN_TURNS * self.w - 1e-9
+                             and float((R - ref_at) @ _unit(ref)) <= self.r)
+                    R, went, wall = self._into(R, n0, 2.0 * self.r if short else math.inf)
                     total += went
+                    if short and wall is None and went >= 2.0 * self.r - 1e-9:
+                        # clear for a body length past a face shorter than that (a bump's),
+                        # not round to the back of the wall held last: along its normal
+                        travelled += went
+                        R, more, wall = self._into(R, ref)
+                        total += more
+                        went = more
                     if (wall is None or went >= 2.0 * self.r
                             or wound >= OPEN_TURNS * self.w - 1e-9):
                         return SweepResult("room", R, hi, lo, True, total)
@@ -240,7 +253,7 @@ class Sweeper:
                 total += STEP
                 steady += STEP
                 if steady >= 2.0 * self.r - 1e-9:
-                    wound = 0.0                    # a wall followed a body length
+                    wound, ref, ref_at = 0.0, n, R.copy()   # a wall followed a body length
                 felt = {round(math.degrees(-h * wrap(c - n))): c for c in self.sectors(R)}
                 felt = {a: c for a, c in felt.items() if -45 <= a <= 90}
                 if felt:
@@ -258,6 +271,7 @@ class Sweeper:
                     if lost >= LOST - 1e-9:
                         if turned == 0:
                             n0 = n                 # the wall whose end it goes round
+                            n0_held = steady >= 2.0 * self.r - 1e-9
                         n = wrap(n + h * self.w)  # the wall ended: round its end
                         turned, lost, steady = turned + 1, 0.0, 0.0
                         wound += self.w

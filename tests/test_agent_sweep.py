@@ -243,6 +243,24 @@ def test_a_raster_wall_s_steps_are_swept_past(ang):
     assert beh.task_state == "failed" and parse_sweep_reason(beh.reason)[1] == -math.inf
 
 
+@pytest.mark.parametrize("bumps", [[(0.4, 0.05)], [(0.4, 0.05), (-0.3, 0.05)], [(0.3, 0.1)]])
+@pytest.mark.parametrize("ang", [0.0, 45.0])
+def test_a_bump_on_the_wall_is_swept_past(bumps, ang):
+    """A bump 0.05 m high (one raster cell) and ``w`` m wide standing out of the wall: the
+    sweep turns into its face, goes over it and round its far corner. That face was shorter
+    than a body length, and the robot went round no wall it followed: the drive on along
+    the face's normal runs parallel to the wall, clear, and turns to the wall held before
+    the bump, which it meets: a turn into it. The sweep joins the edge from its vertex's
+    ray. Before, each case ended "opening" with the robot 0.75 m along the wall."""
+    ring = [[-2, 0]]
+    for x, w in bumps:
+        ring += [[x, 0], [x, 0.05], [x + w, 0.05], [x + w, 0]]
+    ring += [[3, 0], [3, 2], [-2, 2]]
+    wm, pts, rot = _scene(None, ang, ring=ring)
+    beh, _, _ = _run(wm, pts, _task(pts, rot))
+    assert beh.task_state == "failed" and parse_sweep_reason(beh.reason)[1] == -math.inf
+
+
 def test_a_door_narrower_than_the_body_is_swept_past():
     wm, pts, rot = _scene(0.10)
     beh, _, _ = _run(wm, pts, _task(pts, rot))

@@ -164,6 +164,24 @@ def test_the_sweep_emulation_mirrors_the_agent_and_the_world():
     assert truth.RADIUS == p.radius and truth.N_TOUCH == p.n_touch
 
 
+@pytest.mark.parametrize("ang", [10.0, 30.0])
+def test_the_sweep_emulation_goes_over_a_bump_as_the_agent_does(ang):
+    """bench/sweep.py's copy of the agent's rule for a face shorter than a body length
+    (tests/test_agent_sweep.py: a bump on the wall is swept past): a 0.05 m bump 0.05 and
+    0.1 m wide is swept over to the vertex's ray. Before the rule both were an opening."""
+    from bench.sweep import Sweeper
+    rot = math.radians(ang)
+    M = np.array([[math.cos(rot), -math.sin(rot)], [math.sin(rot), math.cos(rot)]])
+    for w in (0.05, 0.1):
+        ring = np.array([[-2, 0], [0.4, 0], [0.4, 0.05], [0.4 + w, 0.05], [0.4 + w, 0],
+                         [3, 0], [3, 2], [-2, 2]], float) @ M.T
+        segs = np.hstack([ring, np.roll(ring, -1, axis=0)])
+        E, Q = np.array([0.0, 0.5]) @ M.T, np.array([0.9, 0.5]) @ M.T
+        sp = Sweeper(segs, np.zeros((0, 2)), E, Q, -1, r=R, heading=0.3, depth=0.75)
+        res = sp.run(np.array([0.0, R + 1e-3]) @ M.T, rot - math.pi / 2, 0.9, math.radians(10))
+        assert res.kind == "swept" and res.lo == -math.inf, (w, res)
+
+
 def test_drive_stops_at_walls():
     sw = truth.Swarm(PolyMap(_square(3)), np.random.default_rng(0), 0.0)
     trav, end, cdir = sw.drive(np.array([0.3, 1.5]), math.pi, 0.9)
