@@ -39,7 +39,12 @@ to the back of the wall it followed last (the normal turned back less than 135 d
 last held for a body length: a bump's face or a jagged wall's step was all it went round):
 that is a turn into a wall, and the sweep goes on along it. Through a door in a wall
 followed for a body length the turn back is 135 deg, and the robot stays, whatever blocks
-it behind the door (tests/test_agent_sweep.py). It stays in sight of its
+it behind the door (tests/test_agent_sweep.py). When the wall it went round was a face
+shorter than a body length (a bump standing out of the wall: it turned into the bump's
+face, then round the bump), neither to the back of the wall held last nor past it, a drive
+clear for a body length runs along that wall, not into an opening: it turns to that wall's
+normal, meets the wall (a turn into it) and sweeps on; a door there it drives through, an
+opening all the same. It stays in sight of its
 vertex's landmarks: with none in view it backs out until one is, and a little farther (a
 robot that sees nobody is cut off from every source, and the coordinator sends it away).
 

@@ -23,7 +23,9 @@ and stays there as a new robot (a clear probe: its own deployments explore what 
 beyond); unless a wall's touch blocks it within a body length (2 r) and n turned back less
 than 135 deg since it last held for a body length (it went round a bump's face or a jagged
 wall's step, not to the back of the wall it followed): a turn into that wall, and the
-sweep goes on along it. A jagged or bending
+sweep goes on along it. Past a face shorter than a body length (a bump's), not round to
+the back of the wall held last nor past it, a drive clear for a body length turns to that
+wall's normal (the agent's rule, agents/sweep.py). A jagged or bending
 wall, a niche, a box's corner turn the robot back as often as forward, or less than 135.
 
 Phase 1 goes towards the edge's other end until the robot crosses the edge's perpendicular
