@@ -7,8 +7,11 @@ them. Vertex and robot ids are ints; ``Step.started_t`` is sim seconds.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from enum import StrEnum
+
+from swarmcover.ground.angles import wrap
 
 from .planner import JobSpec, Snapshot
 from .topology.evidence import Evidence
@@ -126,10 +129,32 @@ def make_job(spec: JobSpec, occupant: dict[int, int]) -> PushJob:
     return job
 
 
+# a robot that found room stands beyond its side when an end sees it at least this far
+# (rad) off the edge's line on that side
+BEYOND_MIN = math.radians(10.0)
+
+
+def beyond_side(snap: Snapshot):
+    """``beyond(key, w)`` on ``snap``: vertex w stands beyond side (u, v, sigma) of edge
+    u-v (sigma +1: counter-clockwise of u -> v): every end that sees both w and the other
+    end sees w on that side, at least BEYOND_MIN off the edge's line, and some end does."""
+    def beyond(key, w: int) -> bool:
+        u, v, sg = int(key[0]), int(key[1]), int(key[2])
+        seen = []
+        for p, q, s in ((u, v, sg), (v, u, -sg)):
+            b = snap.nbrs.get(p, {})
+            if w in b and q in b:
+                a = s * wrap(b[w] - b[q])
+                seen.append(BEYOND_MIN < a < math.pi - BEYOND_MIN)
+        return bool(seen) and all(seen)
+    return beyond
+
+
 def evidence_kwargs(evidence: Evidence, snap: Snapshot) -> dict:
     """What the planner takes of the evidence on ``snap``: the fence's keyword arguments
-    (less the failed directions, passed as ``test_drive_failures``)."""
-    kw = evidence.fence_kwargs(snap.occupant)
+    (less the failed directions, passed as ``test_drive_failures``); a drive that found
+    room counts only while its robot's vertex stands beyond the side (:func:`beyond_side`)."""
+    kw = evidence.fence_kwargs(snap.occupant, beyond_side(snap))
     kw.pop("test_drive_failures")
     return kw
 

@@ -165,7 +165,7 @@ class Pushes:
             placed = self._placed_by(td, spec)
             if placed and dep.state == S.PENDING:
                 # the robot is the new vertex where its drive ended: no deploy, no refine
-                self._record(spec, touched=False)
+                self._record(spec, touched=False, placed=spec.new_vertex)
                 if placed != "wall" and spec.via_frac <= 0:
                     # a clear drive from f: the new vertex is that far from f
                     self.placement.known.append(
@@ -370,7 +370,7 @@ class Pushes:
         job.cancel("test drive touched an obstacle")
 
     def _record(self, spec, touched: bool, contact_offset: float = 0.0,
-                swept: tuple[float, float] | None = None) -> None:
+                swept: tuple[float, float] | None = None, placed: int | None = None) -> None:
         """Book a drive's outcome (coordinator.topology.evidence): the direction actually
         driven, for a touch the agent's touch_offset (sector centre - direction), for a
         wall sweep the (hi, lo) it joined."""
@@ -380,7 +380,7 @@ class Pushes:
                 self.evidence.add_failed_direction(spec.path[-1], float(spec.direction))
             return
         self.evidence.record(dep, touched, direction=float(spec.direction),
-                             contact_offset=contact_offset, swept=swept)
+                             contact_offset=contact_offset, swept=swept, placed=placed)
 
     def _retry(self, job: PushJob) -> bool:
         """Re-plan a push whose test drive touched, within this cycle (spec 3.4(iv): the

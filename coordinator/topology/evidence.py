@@ -83,7 +83,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Container, Mapping
+from typing import Callable, Container, Mapping
 
 __all__ = ["ProbeKey", "SideKey", "DriveRecord", "Evidence", "probe_fractions",
            "probe_depth_rv", "probe_key", "needs_tilt", "tilted_door_rv", "TILT_MATCH",
@@ -230,6 +230,9 @@ class Evidence:
         # key -> tilts (rad) of its tilted probes that touched
         self._tilted: dict[ProbeKey, list[float]] = {}
         self._clear: set[ProbeKey] = set()
+        # clear probe or sweep -> the vertex its robot stayed at (the room it found is
+        # evidence only while that vertex stands beyond the side: :meth:`lost_rooms`)
+        self._room_at: dict[ProbeKey, int] = {}
         # interior probes a FREE probe (no path, nobody refills its vertex) drove clear and
         # came back from: no evidence, the side stays open; never offered free again
         self._returned: set[ProbeKey] = set()
@@ -243,7 +246,8 @@ class Evidence:
     # ---------------------------------------------------------------- recording
     def record(self, dep, touched: bool, *, direction: float | None = None,
                returned: bool = False, contact_offset: float = 0.0,
-               swept: tuple[float, float] | None = None) -> DriveRecord:
+               swept: tuple[float, float] | None = None,
+               placed: int | None = None) -> DriveRecord:
         """Record the outcome of driving ``dep`` (a coordinator.topology.fence.Deployment, or anything
         with its fields). ``direction`` overrides dep.bearing (the direction actually driven,
         e.g. after lattice placement). ``touched``: the drive failed with a touch before it
@@ -257,7 +261,8 @@ class Evidence:
         :func:`needs_tilt` is then offered again, tilted along that centre.
         ``swept``: a wall sweep's (hi, lo) (fractions from its vertex, lo -inf for its
         end's ray; :func:`sweep_interval`) when it touched and swept; a sweep that found
-        room or an opening is a clear drive (``touched`` False, its robot stays)."""
+        room or an opening is a clear drive (``touched`` False, its robot stays).
+        ``placed``: for a clear drive, the vertex its robot stays at as a new robot."""
         d = float(dep.bearing if direction is None else direction)
         frac = float(getattr(dep, "via_frac", 0.0) or 0.0)
         edge = tuple(int(x) for x in dep.edge) if dep.edge is not None else None
@@ -267,7 +272,7 @@ class Evidence:
                           (float(swept[0]), float(swept[1])) if swept is not None else None)
         self.records.append(rec)
         if float(getattr(dep, "sweep_far", 0.0) or 0.0) > 0.0 and edge is not None:
-            self._record_sweep(rec, returned)
+            self._record_sweep(rec, returned, placed)
             return rec
         interior = rec.kind == "probe" and edge is not None and frac > 1e-9
         if touched:
@@ -284,7 +289,10 @@ class Evidence:
         elif interior:
             # a clear interior probe found room (its robot stays there): that fraction is
             # done, it is never offered again (re-offering it stacked robots: issue 21)
-            self._clear.add(probe_key(rec.vertex, edge, rec.sigma, frac))
+            key = probe_key(rec.vertex, edge, rec.sigma, frac)
+            self._clear.add(key)
+            if placed is not None:
+                self._room_at[key] = int(placed)
         return rec
 
     def record_unreached(self, dep) -> int:
@@ -304,7 +312,7 @@ class Evidence:
 
     UNREACHED_LIMIT = 2
 
-    def _record_sweep(self, rec: DriveRecord, returned: bool) -> None:
+    def _record_sweep(self, rec: DriveRecord, returned: bool, placed: int | None = None) -> None:
         """A wall sweep's outcome: its end's try, the interval it joined, or room found."""
         key = probe_key(rec.vertex, rec.edge, rec.sigma, 0.0)
         self._sweep_tries[key] = self._sweep_tries.get(key, 0) + 1
@@ -318,6 +326,20 @@ class Evidence:
             self._returned.add(key)
         else:
             self._clear.add(key)
+            if placed is not None:
+                self._room_at[key] = int(placed)
+
+    def lost_rooms(self, beyond: Callable[[ProbeKey, int], bool]) -> frozenset[ProbeKey]:
+        """Clear probes and sweeps whose robot no longer stands beyond their side:
+        ``beyond(key, vertex)`` says whether the vertex the drive's robot stayed at is seen
+        from the side's ends on that side (coordinator.jobs.beyond_side). Such a drive is
+        no evidence, and its try is given back (:meth:`fence_kwargs`): the inference
+        'probe_clear' rests on a robot standing in the room the drive found. Without this,
+        corridor_doors seed 1 certified 85% coverage: a sweep's robot stood in a doorway,
+        the robots after it drifted back into the corridor, and the side before the door
+        stayed closed."""
+        return frozenset(k for k in self._clear
+                         if k in self._room_at and not beyond(k, self._room_at[k]))
 
     def add_failed_direction(self, vertex: int, direction: float) -> None:
         """A drive from ``vertex`` along ``direction`` touched (no Deployment at hand)."""
@@ -382,19 +404,25 @@ class Evidence:
         return {k: n for k, n in self._sweep_tries.items()
                 if present is None or (k[0] in present and k[1] in present)}
 
-    def fence_kwargs(self, present: Container[int] | None = None) -> dict:
+    def fence_kwargs(self, present: Container[int] | None = None,
+                     beyond: Callable[[ProbeKey, int], bool] | None = None) -> dict:
         """Keyword arguments for detect_fence: test_drive_failures, probe_failures,
         probe_offsets, tilt_failures, probe_clear, probe_unreachable, probe_fracs, sweeps
-        and sweep_tries (restricted to nodes in ``present`` when given)."""
+        and sweep_tries (restricted to nodes in ``present`` when given; with ``beyond``,
+        less the :meth:`lost_rooms` and their tries)."""
+        lost = self.lost_rooms(beyond) if beyond is not None else frozenset()
+        tries = self.sweep_tries(present)
+        for k in lost & tries.keys():
+            tries[k] = max(0, tries[k] - 1)
         return dict(test_drive_failures=self.failed_directions(present),
                     probe_failures=self.failed_probes(present),
                     probe_offsets=self.probe_offsets(present),
                     tilt_failures=self.tilt_failures(present),
-                    probe_clear=self.clear_probes(present),
+                    probe_clear=self.clear_probes(present) - lost,
                     probe_unreachable=self.unreachable_probes(present),
                     probe_fracs=self.fractions,
                     sweeps=self.sweeps(present),
-                    sweep_tries=self.sweep_tries(present))
+                    sweep_tries=tries)
 
     def merge_failures(self, failures: Mapping[int, list[float]]) -> None:
         """Adopt failed directions kept elsewhere (e.g. a restarted coordinator)."""
