@@ -134,6 +134,31 @@ def test_a_sweep_that_found_room_is_no_evidence():
     assert side.reason == "probe_clear" and (e, "probe_clear") in [(int(k), w) for k, w in f.inferred]
 
 
+@pytest.mark.parametrize("placed, closes", [((S / 2, -0.4), True), ((S + 0.35, 0.02), False),
+                                            (None, False)])
+def test_a_room_found_counts_only_while_its_robot_stands_beyond_the_side(placed, closes):
+    """'probe_clear' rests on the robot that found room standing in it. Seen by an end on
+    the side's far side, it does; drifted onto the edge's line (corridor_doors seed 1: the
+    vertex a sweep left in a doorway, refilled by a robot that homed on one bearing and
+    stopped in the corridor) or gone, it does not: the side stays open and that end's
+    sweep is offered again (its try given back), never closed as 'sweep_gap'."""
+    from swarmcover.coordinator.jobs import beyond_side
+    cx, ev = _candidate()
+    a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
+    ev.record(a, touched=False, placed=3)
+    ev.record(b, touched=True, swept=(0.55, -INF))
+    P = [tuple(p) for p in TRI] + ([placed] if placed else [])
+    snap = Snapshot(occupant={i: 10 + i for i in range(len(P))},
+                    nbrs={i: _nbrs(P, i) for i in range(len(P))})
+    f = detect_fence(cx, **ev.fence_kwargs(snap.occupant, beyond_side(snap)))
+    e, side = _side(f, cx)
+    if closes:
+        assert side.reason == "probe_clear"
+    else:
+        assert side.reason != "probe_clear" and side.reason != "sweep_gap"
+        assert [d.vertex for d in _sweeps(f)] == [a.vertex]
+
+
 def test_a_touch_that_could_not_sweep_counts_a_try_but_joins_nothing():
     cx, ev = _candidate()
     a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
