@@ -458,7 +458,7 @@ def test_a_pipelined_run_keeps_the_fixed_graph_and_the_certificate(monkeypatch):
 
     monkeypatch.setattr(pushes.Pushes, "start", spy)
     cfg = load_config("configs/small.toml")
-    sim = SimLoop(cfg, seed=1)
+    sim = SimLoop(cfg, seed=1, coordinator_overrides={"pipeline": True})
     res = sim.run(max_sim_s=4000, max_wall_s=200)
     assert res.certified, res.stop_reason
     assert _coverage(sim, res) >= 0.995
@@ -552,7 +552,7 @@ def test_corridor_doors_seed_1_never_certifies_a_room_it_did_not_cover():
     corridor never entered; its door's side closed by 'probe_clear' after the sweep's robot
     in the doorway was gone): certified must mean covered."""
     cfg = load_config("configs/corridor_doors.toml")
-    sim = SimLoop(cfg, seed=1)
+    sim = SimLoop(cfg, seed=1, coordinator_overrides={"pipeline": True})
     res = sim.run(max_sim_s=20000, max_wall_s=500)
     assert res.certified, res.stop_reason
     assert _coverage(sim, res) >= 0.995
