@@ -232,18 +232,7 @@ def raster_map(pm: PolyMap, cell: float, source) -> PolyMap:
     nx, ny = (np.ceil((pm.outer.max(axis=0) + 2 * cell - lo) / cell)).astype(int)
     xs, ys = lo[0] + (np.arange(nx) + 0.5) * cell, lo[1] + (np.arange(ny) + 0.5) * cell
     gx, gy = np.meshgrid(xs, ys)
-    free = pm.contains(np.stack([gx.ravel(), gy.ravel()], 1)).reshape(ny, nx)
-    for _ in range(100):
-        a, b, c, d = free[:-1, :-1], free[:-1, 1:], free[1:, :-1], free[1:, 1:]
-        p1, p2 = a & d & ~b & ~c, b & c & ~a & ~d
-        if not (p1.any() or p2.any()):
-            break
-    else:  # pragma: no cover - each pass frees cells, so it ends long before
-        raise RuntimeError("raster_map: corner-only contacts remain after 100 passes")
-        j, i = np.nonzero(p1)
-        free[j, i + 1] = True
-        j, i = np.nonzero(p2)
-        free[j, i] = True
+    free = _join_corners(pm.contains(np.stack([gx.ravel(), gy.ravel()], 1)).reshape(ny, nx))
     lab, _ = ndimage.label(free)
     sj, si = int((source[1] - lo[1]) // cell), int((source[0] - lo[0]) // cell)
     free = lab == lab[sj, si]
@@ -272,6 +261,23 @@ def raster_map(pm: PolyMap, cell: float, source) -> PolyMap:
         rings.append(lo + pts[turn] * cell)
     rings.sort(key=lambda r: -abs(_area(r)))
     return PolyMap(rings[0], rings[1:])
+
+
+def _join_corners(free: np.ndarray) -> np.ndarray:
+    """``free`` (a bool grid, rows y) with every two free cells that meet only at a corner
+    joined by freeing one of the other two cells of their 2 x 2 block, so the traced rings
+    are simple."""
+    free = free.copy()
+    for _ in range(100):
+        a, b, c, d = free[:-1, :-1], free[:-1, 1:], free[1:, :-1], free[1:, 1:]
+        p1, p2 = a & d & ~b & ~c, b & c & ~a & ~d
+        if not (p1.any() or p2.any()):
+            return free
+        j, i = np.nonzero(p1)
+        free[j, i + 1] = True
+        j, i = np.nonzero(p2)
+        free[j, i] = True
+    raise RuntimeError("raster_map: corner-only contacts remain after 100 passes")  # pragma: no cover
 
 
 def _area(r: np.ndarray) -> float:

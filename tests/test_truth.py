@@ -128,6 +128,16 @@ def test_maps_are_seeded_and_sources_face_walls():
     assert min(doors) >= 0.3 and max(doors) <= 1.2
 
 
+def test_cells_meeting_only_at_a_corner_are_joined():
+    """raster_map traces free cells into rings; two that touch only at a corner would make
+    a ring cross itself, so one of the block's other two cells is freed (both diagonals)."""
+    for grid in ([[1, 0], [0, 1]], [[0, 1], [1, 0]], [[1, 0, 0], [0, 1, 0], [0, 0, 1]]):
+        free = truth._join_corners(np.array(grid, bool))
+        a, b, c, d = free[:-1, :-1], free[:-1, 1:], free[1:, :-1], free[1:, 1:]
+        assert not ((a & d & ~b & ~c) | (b & c & ~a & ~d)).any(), free
+        assert (free >= np.array(grid, bool)).all()          # nothing free was closed
+
+
 @pytest.mark.parametrize("index", [0, 5, 10])
 def test_raster_maps_turn_the_walls_into_steps_around_the_same_room(index):
     """``make_map(..., raster=0.05)``: the map turned 5-40 deg and drawn on a 0.05 m grid,
