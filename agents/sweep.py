@@ -171,7 +171,8 @@ class Sweep(ModeState):
         self.n0_held = False                 # that wall was followed for a body length
         self.ref = self.n                    # the normal last held for a body length (rad)
         self.ref_at: tuple[float, float] | None = None   # where it held ``ref`` (m)
-        self.turned_in = False               # this into-drive already turned to ``ref``
+        self.turned_in = False               # this into-drive may not turn to ``ref`` (it did, or
+                                             # the wall it went round was held, or it is past it)
         self.into: float | None = None       # an opening found: driving into it (rad)
         # landmarks no push moves: an opening's robot keeps one of them in view
         self.keep = tuple(dict.fromkeys(int(l) for l in (*task.sight, *task.sweep_landmarks)))
