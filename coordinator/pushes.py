@@ -260,7 +260,8 @@ class Pushes:
             return
         for s in list(job.steps):
             if (s.name in (N.MOVE, N.ENTER) and s.state == S.DONE and 0 <= s.n_landmarks < 2
-                    and job.step(N.SETTLE, s.t_index) is None and self.roster.live(s.robot)):
+                    and job.step(N.SETTLE, s.t_index) is None and self.roster.live(s.robot)
+                    and not self._claimed_elsewhere(job, s.robot)):
                 st = Step(N.SETTLE, s.robot, s.target, t_index=s.t_index)
                 job.steps.append(st)
                 busy: set[int] = set()   # what other unfinished pushes are still moving
@@ -274,6 +275,24 @@ class Pushes:
                     st.state, st.reason = S.CANCELLED, "fewer than 2 landmarks"
                 else:
                     self.start(st, task, now)
+
+    def _claimed_elsewhere(self, job: PushJob, rid: int) -> bool:
+        """Whether another push has robot ``rid`` to move: a step of it to do, or a push fed
+        by ``job`` that will take it from the source (the robot ``job`` brought in). Such a
+        robot is not settled: the agent runs one task at a time, so the other push's task
+        would cut the settle short, and the settle step, never reported, held the cycle for
+        its whole timeout (hall300 seed 1 with pipelining: 6 settles, 50 s each); sent
+        second, the settle cut the move short and took the robot back to the source."""
+        for j in self.jobs:
+            if j is job or j.aborted:
+                continue
+            if any(o.robot == rid and o.state in (S.PENDING, S.RUNNING) for o in j.steps):
+                return True
+            first = j.steps_at_source()
+            if (j.feed is job and first is not None and first.state == S.PENDING
+                    and first.robot < 0 and j.source_robot() == rid):
+                return True
+        return False
 
     def _advance_enter(self, job: PushJob, ent: Step, prev: Step, sequential: bool,
                        now: float) -> None:
@@ -304,7 +323,13 @@ class Pushes:
         self.start(ent, task, now)
 
     def start(self, s: Step, task: Task, now: float) -> None:
-        """Send step ``s``'s task: it runs from ``now``."""
+        """Send step ``s``'s task: it runs from ``now``. A settle of the same robot still
+        running ends here (the agent drops it for this task; it would never report)."""
+        for j in self.jobs:
+            for o in j.steps:
+                if (o is not s and o.name == N.SETTLE and o.robot == s.robot
+                        and o.state == S.RUNNING):
+                    o.state, o.reason = S.CANCELLED, f"superseded by {s.name}"
         if task.kind in ("goto", "hold"):
             s.n_landmarks = len(task.landmarks)
         s.task_id = self.out.send(s.robot, task)
