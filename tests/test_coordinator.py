@@ -438,6 +438,50 @@ def test_a_fed_push_test_drives_at_once_and_waits_for_its_source_robot_only_to_m
     assert {("move", 1), ("move", 0)} <= sent(b)
 
 
+class _SettleTasks(_Tasks):
+    def settle(self, rid, v, busy, holder):
+        from swarmcover.bus.messages import Task
+        return Task(kind="goto", vertex=v, landmarks=[1, 2], bearings=[0.0, 1.0])
+
+
+@pytest.mark.parametrize("fed", [True, False])
+def test_the_robot_a_fed_push_takes_is_not_settled(fed):
+    """A robot that entered the source homing on one landmark settles once its push is over,
+    unless the push fed by it takes that robot on: the agent runs one task at a time, and
+    the settle, cut short by the fed push's move, was never reported and held the cycle for
+    its whole timeout (hall300 seed 1 with pipelining: six of them, 50 s each)."""
+    from swarmcover.coordinator.jobs import Step
+    dep = Deployer(CoordinatorConfig(pipeline=True), sources=[0.0])
+    dep.pushes.roster.live = lambda rid: True
+    a = _job([0, 1, 2])
+    b = _job([0, 3, 4], feed=a if fed else None, enter=True)
+    if not fed:
+        b.steps_at_source().robot = 103
+    for job in (a, b):
+        job.steps.append(Step("refine", job.step("deploy").robot, 99, state="cancelled"))
+    for st in a.steps:
+        if st.state == "pending":
+            st.state = "done"
+    a.step("enter").robot, a.step("enter").n_landmarks = 7, 1
+    b.step("test_drive").state = "running"         # b is under way (pipelined)
+    dep.jobs = [a, b]
+    dep.pushes.tasks = _SettleTasks()
+    dep.pushes.advance(a, 5.0)
+    settle = a.step("settle", -1)
+    if fed:
+        assert settle is None                         # b moves robot 7 on: no settle
+        assert b.source_robot() == 7
+    else:
+        assert settle is not None and settle.robot == 7 and settle.state == "running"
+        # a task for robot 7 (here a move of another push) ends that settle: the agent
+        # drops it for the new task, and it would never report
+        mv = Step("move", 7, 3, t_index=0)
+        b.steps.append(mv)
+        dep.pushes.start(mv, _Tasks().move([0, 3], 0, set(), None), 6.0)
+        assert settle.state == "cancelled" and settle.reason == "superseded by move"
+        assert a.finished
+
+
 @pytest.mark.timeout(240)
 def test_a_pipelined_run_keeps_the_fixed_graph_and_the_certificate(monkeypatch):
     """Issue 19 item 4, a seeded in-process run (small map, seed 1) where pushes stream from
