@@ -108,14 +108,13 @@ class CoordinatorConfig:
                                    # are left. Off -> on (wall_keep_rv 0.45): simulated time
                                    # -29% tiny, -20% small (seeds 0-8), -23% corridor_doors,
                                    # -25% on the five larger configs; robots about the same
-    pipeline: bool = False         # a push fed by an earlier push at the same source (its
+    pipeline: bool = True          # a push fed by an earlier push at the same source (its
                                    # robot at p0 is the one that push brings in) test-drives
                                    # at once, beside that push; its movers wait for the robot.
-                                   # false: the whole push waits for it. Seeds 0-8 in-process,
-                                   # false -> true: small 310 -> 277 robots, 5,497 -> 4,186 s;
-                                   # tiny 113 -> 112 robots, 3,258 -> 3,045 s; but hall300
-                                   # (seed 0) 271 -> 323 robots (mean spacing 0.83 -> 0.78
-                                   # rv) for 2,733 -> 2,548 s: off until it keeps the spacing
+                                   # false: the whole push waits for it. In-process, every
+                                   # config seeds 0-2, false -> true: 2,357 -> 2,333 robots,
+                                   # 44,295 -> 38,489 s simulated; hall300 seeds 0-5: 1,681 ->
+                                   # 1,669 robots, 16,267 -> 11,696 s
     max_cycles: int = 100000
     final_recheck: bool = True     # after K is empty: redistribute redundant robots, re-certify
 
