@@ -250,7 +250,8 @@ class Pushes:
 
     def _settle_moves(self, job: PushJob, now: float) -> None:
         """Once a push is over, every robot that moved to its vertex on fewer than two
-        landmarks homes again on all of that vertex's landmarks, now static.
+        landmarks, and is still there, homes again on all of that vertex's landmarks, now
+        static.
 
         One bearing fixes a ray, not a point: a mover whose other landmarks were moving
         (the source being refilled behind it, the robot ahead on the path) stops wherever
@@ -261,6 +262,7 @@ class Pushes:
         for s in list(job.steps):
             if (s.name in (N.MOVE, N.ENTER) and s.state == S.DONE and 0 <= s.n_landmarks < 2
                     and job.step(N.SETTLE, s.t_index) is None and self.roster.live(s.robot)
+                    and self.placement.vertex_of.get(s.robot) == s.target
                     and not self._claimed_elsewhere(job, s.robot)):
                 st = Step(N.SETTLE, s.robot, s.target, t_index=s.t_index)
                 job.steps.append(st)
@@ -284,10 +286,14 @@ class Pushes:
         its whole timeout (hall300 seed 1 with pipelining: 6 settles, 50 s each); sent
         second, the settle cut the move short and took the robot back to the source."""
         for j in self.jobs:
-            if j is job or j.aborted:
+            if j is job:
                 continue
-            if any(o.robot == rid and o.state in (S.PENDING, S.RUNNING) for o in j.steps):
+            # an aborted push's pending steps never start; its running ones still hold
+            to_do = (S.RUNNING,) if j.aborted else (S.PENDING, S.RUNNING)
+            if any(o.robot == rid and o.state in to_do for o in j.steps):
                 return True
+            if j.aborted:
+                continue
             first = j.steps_at_source()
             if (j.feed is job and first is not None and first.state == S.PENDING
                     and first.robot < 0 and j.source_robot() == rid):

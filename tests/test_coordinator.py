@@ -463,6 +463,7 @@ def test_the_robot_a_fed_push_takes_is_not_settled(fed):
         if st.state == "pending":
             st.state = "done"
     a.step("enter").robot, a.step("enter").n_landmarks = 7, 1
+    dep.placement.vertex_of[7] = 0                 # robot 7 entered the source
     b.step("test_drive").state = "running"         # b is under way (pipelined)
     dep.jobs = [a, b]
     dep.pushes.tasks = _SettleTasks()
@@ -471,6 +472,17 @@ def test_the_robot_a_fed_push_takes_is_not_settled(fed):
     if fed:
         assert settle is None                         # b moves robot 7 on: no settle
         assert b.source_robot() == 7
+        # nor once b has moved it on: robot 7 is no longer at the source
+        for name in ("test_drive", "deploy"):
+            b.step(name).state = "done"
+        dep.pushes.advance(b, 6.0)
+        mv = b.step("move", 0)
+        assert mv.robot == 7 and mv.state == "running"
+        mv.state = "done"
+        dep.pushes._step_done(b, mv)
+        assert dep.placement.vertex_of[7] == 3
+        dep.pushes.advance(a, 7.0)
+        assert a.step("settle", -1) is None
     else:
         assert settle is not None and settle.robot == 7 and settle.state == "running"
         # a task for robot 7 (here a move of another push) ends that settle: the agent
