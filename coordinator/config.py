@@ -112,9 +112,9 @@ class CoordinatorConfig:
                                    # robot at p0 is the one that push brings in) test-drives
                                    # at once, beside that push; its movers wait for the robot.
                                    # false: the whole push waits for it. In-process, every
-                                   # config seeds 0-2, false -> true: 2,357 -> 2,333 robots,
-                                   # 44,295 -> 38,489 s simulated; hall300 seeds 0-5: 1,681 ->
-                                   # 1,669 robots, 16,267 -> 11,696 s
+                                   # config seeds 0-2, against false before the settle fix
+                                   # (Pushes._claimed_elsewhere): 2,357 -> 2,351 robots,
+                                   # 44,295 -> 40,710 s simulated (hall300: README)
     max_cycles: int = 100000
     final_recheck: bool = True     # after K is empty: redistribute redundant robots, re-certify
 
