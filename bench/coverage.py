@@ -13,7 +13,10 @@ on stderr, and one JSON object as the last line.
 
 Targets (issue 19, against the Euler lower bound ``euler_bound`` that summary.json reports
 for every run): certified with ground-truth coverage >= 99.5%; robots_used <= 1.25 x
-euler_bound; simulated time per robot used <= 5 s. Issue 6's (ratio_same_spacing <= 1.10
+euler_bound; simulated time per robot used <= 5 s. Each run also reports the push's own
+floor of time per robot (``push_floor_s``: its mean move plus its mean entry, as the
+coordinator's Complex carries them; a source sends out one robot per move plus entry at
+best) and the time per robot over it. Issue 6's (ratio_same_spacing <= 1.10
 open_room, <= 1.15 structured; ratio <= 1.35 open_room; cycles <= 0.5 x robots) are printed
 per run too. The last table has one row per config and seed, each target marked ok/MISS.
 """
@@ -95,13 +98,18 @@ def targets(s: dict) -> dict:
 def table(results: list[dict]) -> str:
     """One markdown table over configs and seeds, targets marked ok/MISS."""
     heads = list(targets({}).keys())
-    lines = ["| config | seed | stop | " + " | ".join(heads) + " | cycles |",
-             "|---|---|---|" + "---|" * len(heads) + "---|"]
+    lines = ["| config | seed | stop | " + " | ".join(heads)
+             + " | cycles | push floor s (move + entry) | s / robot over floor |",
+             "|---|---|---|" + "---|" * len(heads) + "---|---|---|"]
     for s in results:
         t = targets(s)
         cells = [f"{v} {'ok' if ok else 'MISS'}" for v, ok in t.values()]
+        fl, over = s.get("push_floor_s"), s.get("s_per_robot_over_floor")
+        fl_txt = (f"{fl:.1f} ({s.get('move_s'):.1f} + {s.get('enter_s'):.1f})"
+                  if fl is not None else "-")
         lines.append(f"| {s.get('name')} | {s.get('seed')} | {s.get('stop_reason', '-')} | "
-                     + " | ".join(cells) + f" | {s.get('cycles')} |")
+                     + " | ".join(cells) + f" | {s.get('cycles')} | {fl_txt} | "
+                     + (f"{over:.2f}" if over is not None else "-") + " |")
     return "\n".join(lines)
 
 
@@ -221,7 +229,8 @@ def main(argv=None) -> int:
     keys = ("name", "seed", "certified", "stop_reason", "robots_used", "euler_bound",
             "robots_per_bound", "sim_s_per_robot", "ideal_count", "ratio", "mean_spacing",
             "ideal_count_same_spacing", "ratio_same_spacing", "coverage", "false_certificate",
-            "uncovered_reachable_m2", "cycles", "sim_time_s", "wall_time_s", "mode")
+            "uncovered_reachable_m2", "cycles", "sim_time_s", "wall_time_s", "mode",
+            "move_s", "enter_s", "push_floor_s", "s_per_robot_over_floor")
     print(table(results), flush=True)
     if pairs:
         print(agreement_table(pairs), flush=True)

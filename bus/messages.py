@@ -677,6 +677,10 @@ class Complex(Message):
     exceptions: one-sided edges the fence excuses (spec 3.2: the open side lies inside
       the covered lens), indices into the edge list; with frontier and obstacle they are
       every one-sided edge, which run's re-check tests against the world's geometry.
+    move_s / enter_s: mean simulated seconds (s) of the moves (a robot one vertex on along
+      a push's path) and of the entries (a new robot to the source) done so far this
+      epoch; 0 before the first. Their sum is the push's floor per robot through one
+      source (summary.json's ``push_floor_s``).
     """
     cycle: int = f_int(0)
     t: float = f_float(0.0)
@@ -697,6 +701,8 @@ class Complex(Message):
     inferred: list = f_ints(0, optional=True)
     inferred_why: list = f_strs(maxlen=40, optional=True)
     exceptions: list = f_ints(0, optional=True)
+    move_s: float = f_float(0.0, 1e6, optional=True)
+    enter_s: float = f_float(0.0, 1e6, optional=True)
 
     def _post_check(self):
         if len(self.vertices) != len(self.occupants):

@@ -394,7 +394,9 @@ class Deployer:
             failures_healed=self.failures_healed, reason=self.stop_reason[:200],
             inferred=[int(e) for e, _ in getattr(plan, "inferred", ())],
             inferred_why=[str(w) for _, w in getattr(plan, "inferred", ())],
-            exceptions=[int(e) for e in getattr(plan, "exceptions", ())])
+            exceptions=[int(e) for e in getattr(plan, "exceptions", ())],
+            move_s=self.pushes.mean_done_s(StepName.MOVE),
+            enter_s=self.pushes.mean_done_s(StepName.ENTER))
 
     # ------------------------------------------------------------------ helpers
     def _spawn(self, source: int, now: float) -> int:

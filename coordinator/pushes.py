@@ -45,6 +45,7 @@ class Pushes:
         self.jobs: list[PushJob] = []
         self.cycle = 0                   # the deployment cycle (for the log)
         self.retried = 0                 # pushes re-planned within their cycle
+        self.done_s: dict[str, list[float]] = {}   # step name -> [steps done, their sim s]
         self._snapshot: Snapshot | None = None
         self.tasks: TaskBuilder | None = None
 
@@ -74,11 +75,20 @@ class Pushes:
                 if s.robot == rid and s.task_id == st.task_id and s.state == S.RUNNING:
                     if st.task_state == "done":
                         s.state, s.reason = S.DONE, st.reason
+                        n_t = self.done_s.setdefault(str(s.name), [0, 0.0])
+                        n_t[0] += 1
+                        n_t[1] += max(0.0, st.t - s.started_t)
                         self._step_done(job, s)
                     elif st.task_state == "failed":
                         s.state, s.reason = S.FAILED, st.reason
                         s.touch_offset = st.touch_offset
                         self._step_done(job, s)
+
+    def mean_done_s(self, name: str) -> float:
+        """Mean simulated s from start to report of the steps ``name`` done so far (0:
+        none yet)."""
+        n, t = self.done_s.get(str(name), (0, 0.0))
+        return t / n if n else 0.0
 
     def robot_died(self, rid: int) -> None:
         """Abort every push with a step of robot ``rid`` to do; its running step failed."""

@@ -221,6 +221,16 @@ def compute_summary(cfg, wmap, truth: Truth | None, cx: Complex | None, extra: d
         sim_s_per_robot=(sim_t / robots_used if sim_t is not None and robots_used else None),
         mean_spacing=mean_spacing,
     )
+    # the push's own floor (issue 19): every robot enters at a source, and the next push
+    # from it moves only once that robot is in; so a source sends out one robot per move
+    # plus entry at best, whatever else the run does
+    move_s, enter_s = getattr(cx, "move_s", 0.0) or 0.0, getattr(cx, "enter_s", 0.0) or 0.0
+    floor = move_s + enter_s if move_s > 0 and enter_s > 0 else None
+    out["move_s"] = move_s or None
+    out["enter_s"] = enter_s or None
+    out["push_floor_s"] = floor
+    out["s_per_robot_over_floor"] = (out["sim_s_per_robot"] / floor
+                                     if floor and out["sim_s_per_robot"] is not None else None)
     if lengths and mean_spacing:
         same = _ideal_number(ideal_count(wmap, mean_spacing * rv))
         out["ideal_count_same_spacing"] = same

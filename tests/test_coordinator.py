@@ -494,6 +494,34 @@ def test_the_robot_a_fed_push_takes_is_not_settled(fed):
         assert a.finished
 
 
+def test_the_complex_carries_the_mean_move_and_entry_as_the_agents_reported_them():
+    """move_s / enter_s (summary.json's push floor) average the steps done, from each
+    step's start to the simulated time of the Status that reports it; failed steps and
+    other kinds do not count."""
+    dep = Deployer(CoordinatorConfig(), sources=[0.0])
+    job = _job([0, 1, 2])
+    for s, t0 in zip(job.steps, (0.0, 0.0, 10.0, 12.0, 20.0)):
+        s.state, s.started_t, s.task_id = "running", t0, 1
+    dep.jobs = [job]
+    mv1, mv0, ent = job.step("move", 1), job.step("move", 0), job.step("enter")
+    ent.robot = 7
+    done = dict(state="holding", task_id=1, task_state="done")
+    dep.pushes.track(mv1.robot, Status(robot=mv1.robot, seq=1, t=13.0, **done))
+    dep.pushes.track(mv0.robot, Status(robot=mv0.robot, seq=1, t=17.0, **done))
+    dep.pushes.track(7, Status(robot=7, seq=1, t=21.5, **done))
+    dep.pushes.track(job.step("test_drive").robot,
+                     Status(robot=job.step("test_drive").robot, seq=1, t=30.0, state="holding",
+                            task_id=1, task_state="failed", reason="touch"))
+    assert dep.pushes.mean_done_s("move") == pytest.approx((3.0 + 5.0) / 2)
+    assert dep.pushes.mean_done_s("enter") == pytest.approx(1.5)
+    assert dep.pushes.mean_done_s("test_drive") == 0.0
+    from swarmcover.coordinator.planner import CyclePlan
+    dep.snapshot = dep.placement.snapshot(dep.roster, [0.0])
+    cx = dep._complex_msg(CyclePlan(edges=[], triangles=[], frontier=[], obstacle=[],
+                                    certified=False), 30.0, "running")
+    assert cx.move_s == pytest.approx(4.0) and cx.enter_s == pytest.approx(1.5)
+
+
 @pytest.mark.timeout(240)
 def test_a_pipelined_run_keeps_the_fixed_graph_and_the_certificate(monkeypatch):
     """Issue 19 item 4, a seeded in-process run (small map, seed 1) where pushes stream from

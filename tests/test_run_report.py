@@ -292,3 +292,22 @@ def test_final_png_marks_the_robots_the_run_saw_removed_as_redundant():
     X, Y = fig.axes[0].transData.transform((3.5, 3.0))
     grey = np.array([int(COLORS["removed"][k:k + 2], 16) for k in (1, 3, 5)])
     assert np.abs(img[int(round(img.shape[0] - Y)), int(round(X))] - grey).max() <= 3
+
+
+def test_push_floor_is_the_complex_mean_move_plus_entry_and_null_without_them():
+    cfg = load_config("configs/tiny.toml")
+    wm = build_map(cfg)
+    t = Truth(ids=[0, 1], x=[0.5, 1.0], y=[0.5, 0.5], theta=[0.0, 0.0], live=[False, False],
+              t=40.0)
+    cx = Complex(cycle=3, t=40.0, vertices=[0, 1], occupants=[0, 1], edges=[0, 1],
+                 sources=[0], move_s=3.0, enter_s=1.0)
+    s = compute_summary(cfg, wm, t, cx, dict(certified=False, sim_time_s=40.0))
+    assert s["move_s"] == 3.0 and s["enter_s"] == 1.0 and s["push_floor_s"] == 4.0
+    assert s["sim_s_per_robot"] == 20.0 and s["s_per_robot_over_floor"] == 5.0
+    # a coordinator that predates the fields, or a run with no entry yet: no floor
+    for fields in ({}, dict(move_s=3.0)):
+        cx = Complex(cycle=3, t=40.0, vertices=[0, 1], occupants=[0, 1], edges=[0, 1],
+                     sources=[0], **fields)
+        s = compute_summary(cfg, wm, t, cx, dict(certified=False, sim_time_s=40.0))
+        assert s["push_floor_s"] is None and s["s_per_robot_over_floor"] is None
+        _strict(strict_json(s))
