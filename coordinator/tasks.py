@@ -232,16 +232,28 @@ class TaskBuilder:
             return None
         return self.goto(v, lm, br)
 
-    def move(self, path: list[int], t: int, moving: set[int], ahead: int | None) -> Task | None:
+    def move(self, path: list[int], t: int, moving: set[int], ahead: int | None,
+             holder: dict[int, int] | None = None) -> Task | None:
         """Task for the robot moving p_t -> p_{t+1} (t = -1: the new robot entering p0).
 
-        Landmarks: occupants of the target's neighbours that are not ``moving`` this cycle;
-        plus ``ahead``, the robot now at p_{t+2} once it has arrived (sequential fallback).
-        Returns None when no landmark at all is available (the mover then just holds).
+        Landmarks: the robots holding the target's neighbour vertices, but for the
+        ``moving`` ones (``holder``: vertex -> the robot there now; None: the snapshot's
+        occupants); plus ``ahead``, the robot now at p_{t+2} once it has arrived
+        (sequential fallback). The bearings are the target's recorded ones. Returns None
+        when no landmark at all is available (the mover then just holds).
         """
         target = path[t + 1]
-        lm, br = self.vertex_landmarks(target, exclude=moving)
-        if ahead is not None and t + 2 < len(path):
+        if holder is None:
+            lm, br = self.vertex_landmarks(target, exclude=moving)
+        else:
+            lm, br = [], []
+            for u, b in sorted(self.snap.nbrs.get(target, {}).items()):
+                r = holder.get(u)
+                if u in moving or r is None:
+                    continue
+                lm.append(r)
+                br.append(b)
+        if ahead is not None and t + 2 < len(path) and ahead not in lm:
             b = self.snap.nbrs.get(target, {}).get(path[t + 2])
             if b is not None:
                 lm.append(ahead)

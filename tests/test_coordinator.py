@@ -386,7 +386,7 @@ class _Tasks:
         from swarmcover.bus.messages import Task
         return Task(kind="deploy", vertex=spec.new_vertex)
 
-    def move(self, path, t, moving, ahead):
+    def move(self, path, t, moving, ahead, holder=None):
         from swarmcover.bus.messages import Task
         return Task(kind="goto", vertex=path[t + 1], landmarks=[1, 2], bearings=[0.0, 1.0])
 
@@ -520,6 +520,39 @@ def test_the_complex_carries_the_mean_move_and_entry_as_the_agents_reported_them
     cx = dep._complex_msg(CyclePlan(edges=[], triangles=[], frontier=[], obstacle=[],
                                     certified=False), 30.0, "running")
     assert cx.move_s == pytest.approx(4.0) and cx.enter_s == pytest.approx(1.5)
+
+
+def test_a_vertex_a_push_is_done_with_is_a_landmark_held_by_the_robot_there_now():
+    """A mover's landmarks: the robots holding its target's neighbour vertices now, but for
+    vertices still in motion. Before, every vertex on a path of the cycle was left out, and
+    with pushes streaming from the source the source's own neighbours were: robots entered
+    it homing on one bearing (structured seed 0: 19 of 161 entries)."""
+    from swarmcover.coordinator.planner import Snapshot
+    dep = Deployer(CoordinatorConfig(pipeline=True), sources=[0.0])
+    dep.pushes.roster.live = lambda rid: True
+    # source 0 sees 1, 3 and 5; a (0 -> 1 -> 2) is over, b (0 -> 3 -> 4) is fed by it
+    occ = {0: 100, 1: 101, 2: 102, 3: 103, 4: 104, 5: 105}
+    nbrs = {0: {1: 0.0, 3: 1.0, 5: 2.0}, 1: {0: 3.0, 2: 0.0}, 3: {0: 4.0, 4: 0.0},
+            5: {0: 5.0}, 2: {1: 3.0}, 4: {3: 4.0}}
+    dep.pushes.snapshot = Snapshot(occupant=occ, nbrs=nbrs, sources=[0], source_dirs=[0.0])
+    dep.placement.vertex_of.update({r: v for v, r in occ.items()})
+    a = _job([0, 1, 2])
+    b = _job([0, 3, 4], feed=a)
+    for st in a.steps:
+        st.state = "done"
+    a.step("enter").robot = 7
+    for st in a.steps:                              # as _step_done books them
+        if st.name in ("deploy", "move", "enter"):
+            dep.placement.vertex_of[st.robot] = st.target
+    b.steps_at_source().robot = 7
+    dep.jobs = [a, b]
+    task = dep.pushes._task_move(b, -1, arrived=False)   # b's new robot entering 0
+    # 1 is done with (held by robot 100, which moved there); 3 is b's, still to move
+    assert sorted(zip(task.landmarks, task.bearings)) == [(100, 0.0), (105, 2.0)]
+    # a move that failed leaves its robot somewhere near, not known where: not a landmark
+    a.step("move", 0).state = "failed"
+    task = dep.pushes._task_move(b, -1, arrived=False)
+    assert list(zip(task.landmarks, task.bearings)) == [(105, 2.0)]
 
 
 @pytest.mark.timeout(240)
