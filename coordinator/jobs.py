@@ -80,6 +80,13 @@ class PushJob:
     def finished(self) -> bool:
         return all(s.state in FINISHED for s in self.steps)
 
+    def to_do(self) -> list[Step]:
+        """The steps still to run or running: an aborted push's pending steps never start,
+        its running ones still hold their robots."""
+        states = ((StepState.RUNNING,) if self.aborted
+                  else (StepState.PENDING, StepState.RUNNING))
+        return [s for s in self.steps if s.state in states]
+
     def cancel(self, why: str) -> None:
         """Abort the push: its pending steps never start."""
         self.aborted = True

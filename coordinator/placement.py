@@ -80,8 +80,9 @@ class Placement:
         return True
 
     def holders(self, roster: Roster) -> dict[int, int]:
-        """vertex -> the live robot holding it now."""
-        return {u: r for r, u in self.vertex_of.items() if roster.live(r)}
+        """vertex -> the live robot holding it now (not one sent away)."""
+        return {u: r for r, u in self.vertex_of.items()
+                if roster.live(r) and r not in self.left}
 
     def snapshot(self, roster: Roster, sources: list[float]) -> Snapshot:
         """The complex as the members see it now (``sources``: base headings by index)."""

@@ -238,8 +238,7 @@ class Pushes:
         0.2-0.4 m from where robots are placed."""
         path = job.spec.path
         mover = job.step(N.MOVE, t + 1) if arrived and t + 2 < len(path) else None
-        holder = {v: r for v, r in self.placement.holders(self.roster).items()
-                  if r not in self.placement.left}
+        holder = self.placement.holders(self.roster)
         return self.tasks.move(path, t, self._in_motion(holder),
                                None if mover is None else mover.robot, holder=holder)
 
@@ -251,12 +250,11 @@ class Pushes:
         held = {r: v for v, r in holder.items()}
         out: set[int] = set()
         for j in self.jobs:
-            to_do = (S.RUNNING,) if j.aborted else (S.PENDING, S.RUNNING)
-            for o in j.steps:
-                if o.state in to_do or (o.state == S.FAILED and o.name != N.TEST_DRIVE):
-                    out.add(o.target)
-                    if o.robot in held:
-                        out.add(held[o.robot])
+            failed = [o for o in j.steps if o.state == S.FAILED and o.name != N.TEST_DRIVE]
+            for o in j.to_do() + failed:
+                out.add(o.target)
+                if o.robot in held:
+                    out.add(held[o.robot])
         return out
 
     def _free_probe_home(self, job: PushJob, td: Step, now: float) -> None:
@@ -322,9 +320,7 @@ class Pushes:
         for j in self.jobs:
             if j is job:
                 continue
-            # an aborted push's pending steps never start; its running ones still hold
-            to_do = (S.RUNNING,) if j.aborted else (S.PENDING, S.RUNNING)
-            if any(o.robot == rid and o.state in to_do for o in j.steps):
+            if any(o.robot == rid for o in j.to_do()):
                 return True
             if j.aborted:
                 continue

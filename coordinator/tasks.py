@@ -85,14 +85,19 @@ class TaskBuilder:
         return out
 
     # ------------------------------------------------------------------ landmarks
-    def vertex_landmarks(self, v: int, exclude: set[int]) -> tuple[list[int], list[float]]:
-        """Occupants of v's neighbour vertices (minus ``exclude``) and v's recorded bearings."""
+    def vertex_landmarks(self, v: int, exclude: set[int], holder: dict[int, int] | None = None,
+                         skip: int | None = None) -> tuple[list[int], list[float]]:
+        """The live robots holding v's neighbour vertices (minus ``exclude``; ``holder``:
+        vertex -> the robot there now, None: the snapshot's occupants; never robot
+        ``skip``) and v's recorded bearings of those vertices."""
         snap = self.snap
+        holder = snap.occupant if holder is None else holder
         lm, br = [], []
         for u, b in sorted(snap.nbrs.get(v, {}).items()):
-            if u in exclude or u not in snap.occupant or not self.roster.live(snap.occupant[u]):
+            r = holder.get(u)
+            if u in exclude or r is None or r == skip or not self.roster.live(r):
                 continue
-            lm.append(snap.occupant[u])
+            lm.append(r)
             br.append(b)
         return lm, br
 
@@ -221,13 +226,7 @@ class TaskBuilder:
         """goto v on the robots holding v's neighbour vertices now (``holder``: vertex ->
         robot; None if < 2), leaving out the ``busy`` vertices other unfinished pushes are
         still moving."""
-        lm, br = [], []
-        for u, b in sorted(self.snap.nbrs.get(v, {}).items()):
-            r = holder.get(u)
-            if u in busy or r is None or r == rid:
-                continue
-            lm.append(r)
-            br.append(b)
+        lm, br = self.vertex_landmarks(v, busy, holder, skip=rid)
         if len(lm) < 2:
             return None
         return self.goto(v, lm, br)
@@ -243,16 +242,7 @@ class TaskBuilder:
         when no landmark at all is available (the mover then just holds).
         """
         target = path[t + 1]
-        if holder is None:
-            lm, br = self.vertex_landmarks(target, exclude=moving)
-        else:
-            lm, br = [], []
-            for u, b in sorted(self.snap.nbrs.get(target, {}).items()):
-                r = holder.get(u)
-                if u in moving or r is None:
-                    continue
-                lm.append(r)
-                br.append(b)
+        lm, br = self.vertex_landmarks(target, moving, holder)
         if ahead is not None and t + 2 < len(path) and ahead not in lm:
             b = self.snap.nbrs.get(target, {}).get(path[t + 2])
             if b is not None:
