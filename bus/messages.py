@@ -679,8 +679,8 @@ class Complex(Message):
       every one-sided edge, which run's re-check tests against the world's geometry.
     move_s / enter_s: mean simulated seconds (s) of the moves (a robot one vertex on along
       a push's path) and of the entries (a new robot to the source) done so far this
-      epoch; 0 before the first. Their sum is the push's floor per robot through one
-      source (summary.json's ``push_floor_s``).
+      epoch; 0 before the first. Their sum is about the pace at which robots leave one
+      source (summary.json's ``push_floor_s``; an entry may overlap the move before it).
     """
     cycle: int = f_int(0)
     t: float = f_float(0.0)

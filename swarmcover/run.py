@@ -222,8 +222,8 @@ def compute_summary(cfg, wmap, truth: Truth | None, cx: Complex | None, extra: d
         mean_spacing=mean_spacing,
     )
     # the push's own floor (issue 19): every robot enters at a source, and the next push
-    # from it moves only once that robot is in; so a source sends out one robot per move
-    # plus entry at best, whatever else the run does
+    # from it moves only once that robot is in; so robots leave a source about one per move
+    # plus entry (measured, not a bound: an entry may overlap the move before it)
     move_s, enter_s = getattr(cx, "move_s", 0.0) or 0.0, getattr(cx, "enter_s", 0.0) or 0.0
     floor = move_s + enter_s if move_s > 0 and enter_s > 0 else None
     out["move_s"] = move_s or None
