@@ -123,15 +123,18 @@ def _same_jobs(got, want):
 
 # plan_cycle's output on the front state without wall contacts (no probe, no evidence:
 # every job an edge deployment placed on the lattice), computed by the code before the
-# optimisations (commit 6df0bd2)
+# optimisations (commit 6df0bd2), and frozen again when shape.estimate_shape took its edge
+# length prior (shape.EDGE_PRIOR, 2026-11-27): on this rigid swarm the prior moved the
+# jobs' directions by at most 4.5e-4 rad and their distances by at most 1.2e-3 rv, and
+# changed nothing else
 FROZEN_BARE_FRONT = dict(
     edges=796, triangles=495, frontier=107, obstacle=0, certified=True, redundant=[],
     digest="a6e1bb4efe3c6f2f",
-    jobs=[([0, 2, 14, 23, 37], -1.429514, 0.75448, "edge", False, [54, 37]),
-          ([0, 4, 16, 31, 57], 3.138496, 0.521076, "edge", False, [44, 49, 72, 80, 57]),
-          ([0, 1, 15, 34, 53, 65], 2.618371, 0.558296, "edge", False, [42, 68, 65]),
-          ([0, 6, 18, 32, 55, 73], -0.031994, 0.621886, "edge", False, [50, 73]),
-          ([0, 5, 9, 19, 46, 59], -1.613181, 0.880189, "edge", False, [85, 59]),
+    jobs=[([0, 2, 14, 23, 37], -1.429580, 0.753870, "edge", False, [54, 37]),
+          ([0, 4, 16, 31, 57], 3.138042, 0.520985, "edge", False, [44, 49, 72, 80, 57]),
+          ([0, 1, 15, 34, 53, 65], 2.618359, 0.558289, "edge", False, [42, 68, 65]),
+          ([0, 6, 18, 32, 55, 73], -0.032072, 0.621956, "edge", False, [50, 73]),
+          ([0, 5, 9, 19, 46, 59], -1.612914, 0.879024, "edge", False, [85, 59]),
           ([0, 3, 17, 28, 39, 67], -3.084927, 0.9, "edge", False, [72, 88, 67])])
 
 

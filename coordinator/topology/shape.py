@@ -10,7 +10,9 @@ scale. Nothing here uses positions from outside the swarm.
   when every robot is holonomic (their frames are parallel).
 * ``estimate_shape(nbrs, headings, known)``: vertex positions in the root's frame (rv's
   unit) by linear least squares on the bearing constraints n(beta_uv) . (x_v - x_u) = 0
-  with the mean edge pinned, scaled by the median ratio of known to estimated lengths.
+  with the mean edge pinned and a weak prior that each edge is about one mean edge long
+  (``EDGE_PRIOR``: the scale of a part the bearings leave free), scaled by the median
+  ratio of known to estimated lengths.
 * ``lattice_target(...)``: the point of a triangular lattice of spacing d0 that a frontier
   robot should deploy to: beyond the fence edge, within reach of both its ends, not next
   to any robot already there.
@@ -33,9 +35,26 @@ from swarmcover.ground.angles import wrap
 
 __all__ = ["align_headings", "estimate_shape", "Lattice", "lattice_target"]
 
+# Weight of the length prior, one row per bearing report: EDGE_PRIOR . (u_ab . (x_b - x_a) - 1)
+# = 0, u_ab the reported bearing's unit vector (the edge about one mean edge long; bearing
+# rows have weight 1). Bearings fix a triangulated part's shape up to scale, but a part
+# joined to the rest by one vertex (a hinge) or by a chain has a scale of its own, which the
+# bearings leave free: the one mean-edge gauge let such parts stretch, and on pillar_hall
+# seed 2 a cycle's estimate had an edge 3.9 times its length and the swarm's other robots
+# 2.2 rv (median) from where it put them; the lattice targets of those cycles fell on
+# robots already there. With the prior, the same runs' estimates put every robot within
+# 0.011 rv (pillar_hall seed 2) and 0.048 rv (structured seed 0) of where it was, 99 times
+# in 100, against 1.08 and 0.65 rv without (a translation fitted within 2.5 rv of each
+# robot). Its cost: noisy bearings pull a part with a free scale to shrink, against a
+# prior that grows as EDGE_PRIOR^2 (a fan hinged on one robot: 0.04 rv off at 0.5 deg of
+# bearing noise, 0.14 rv at 1 deg), and it bends a weakly rigid swarm a little toward
+# equal edges (exact bearings, 2,000 random swarms of 3-40: median 0.003 rv, worst
+# 0.033). tests/test_topology_shape.py checks both.
+EDGE_PRIOR = 0.05
+
 # estimate_shape solves swarms of up to this many vertices by the dense normal equations
-# (as first written, bit-for-bit), larger ones by the sparse bordered system (the same
-# solution to ~1e-9 rv; 1.2 s -> 15 ms at 1,000 robots)
+# (as first written, plus the length prior), larger ones by the sparse bordered system
+# (the same solution to ~1e-9 rv; 1.2 s -> 15 ms at 1,000 robots)
 _DENSE_MAX = 200
 
 
@@ -109,10 +128,10 @@ def _estimate_shape_dense(nbrs: Mapping[int, Mapping[int, float]], headings: Map
                    known: Iterable[tuple[int, int, float]] = (), *, root: int | None = None,
                    default_edge: float = 0.85) -> dict[int, np.ndarray]:
     """:func:`estimate_shape` by the normal equations A^T A x = A^T b, the scale-gauge
-    row included (which makes them dense: O(N^2) memory, about N^3 time). Kept, unchanged,
-    for swarms of up to ``_DENSE_MAX`` vertices, where it is cheap: their results stay
-    bit-for-bit what they were (a closed-loop run amplifies even 1e-13 rad of difference
-    in a commanded direction into another trajectory)."""
+    row included (which makes them dense: O(N^2) memory, about N^3 time). Kept for swarms
+    of up to ``_DENSE_MAX`` vertices, where it is cheap: their results stay bit-for-bit
+    what this code gives (a closed-loop run amplifies even 1e-13 rad of difference in a
+    commanded direction into another trajectory)."""
     verts = sorted(int(v) for v in nbrs)
     if not verts:
         return {}
@@ -151,6 +170,10 @@ def _estimate_shape_dense(nbrs: Mapping[int, Mapping[int, float]], headings: Map
                 add(r, a, b, -math.sin(beta), math.cos(beta))  # no sideways offset
                 rhs.append(0.0)
                 r += 1
+                # the length prior (EDGE_PRIOR): the edge about one mean edge long
+                add(r, a, b, EDGE_PRIOR * math.cos(beta), EDGE_PRIOR * math.sin(beta))
+                rhs.append(EDGE_PRIOR)
+                r += 1
     # scale gauge, one row: the mean of the edges' lengths along their bearings is 1
     w = 10.0 * math.sqrt(len(world))
     for (a, b), beta in world.items():
@@ -188,8 +211,10 @@ def estimate_shape(nbrs: Mapping[int, Mapping[int, float]], headings: Mapping[in
 
     nbrs: vertex -> {neighbour vertex: bearing (rad, occupant's body frame)}. headings:
     from :func:`align_headings`. known: (a, b, length) for vertex pairs whose distance the
-    coordinator commanded. The shape comes from the bearings alone, with the mean edge
-    pinned to 1 (noisy bearing rows would otherwise pull the estimate to shrink); the
+    coordinator commanded. The shape comes from the bearings, with the mean edge pinned to
+    1 (noisy bearing rows would otherwise pull the estimate to shrink) and each edge held
+    weakly to that length (``EDGE_PRIOR``: a part hinged on one robot, or joined by a
+    chain, has a scale the bearings leave free); the
     scale is then the median of known length / estimated length over the known pairs
     (robust to pairs that drifted since), or ``default_edge`` without any. Only the
     connected component of ``root`` (default: the lowest vertex) is returned.
@@ -230,15 +255,19 @@ def estimate_shape(nbrs: Mapping[int, Mapping[int, float]], headings: Mapping[in
     m = 2 * len(order)
     k = ia.shape[0]
     nx, ny = -np.sin(beta), np.cos(beta)
-    rows = np.repeat(np.arange(k, dtype=np.int64), 4)
-    cols = np.stack([2 * ib, 2 * ib + 1, 2 * ia, 2 * ia + 1], 1).ravel()
-    vals = np.stack([nx, ny, -nx, -ny], 1).ravel()
+    # then one length-prior row per report (EDGE_PRIOR): the edge about one mean edge long
+    px, py = EDGE_PRIOR * np.cos(beta), EDGE_PRIOR * np.sin(beta)
+    rows = np.repeat(np.arange(2 * k, dtype=np.int64), 4)
+    cols = np.tile(np.stack([2 * ib, 2 * ib + 1, 2 * ia, 2 * ia + 1], 1), (2, 1)).ravel()
+    vals = np.concatenate([np.stack([nx, ny, -nx, -ny], 1),
+                           np.stack([px, py, -px, -py], 1)]).ravel()
+    prior_rhs = np.concatenate([np.zeros(k), np.full(k, EDGE_PRIOR), [0.0, 0.0]])
     # translation gauge: the root at the origin (two rows of weight 10)
     i0 = int(col_of[i_root])
-    rows = np.concatenate([rows, [k, k + 1]])
+    rows = np.concatenate([rows, [2 * k, 2 * k + 1]])
     cols = np.concatenate([cols, [2 * i0, 2 * i0 + 1]])
     vals = np.concatenate([vals, [10.0, 10.0]])
-    A = coo_matrix((vals, (rows, cols)), shape=(k + 2, m)).tocsr()
+    A = coo_matrix((vals, (rows, cols)), shape=(2 * k + 2, m)).tocsr()
     # scale gauge, one row g: the mean of the edges' lengths along their bearings is w/w = 1
     # (the shape from the bearings alone, with the mean edge pinned: noisy bearing rows
     # would otherwise pull the estimate to shrink)
@@ -265,7 +294,7 @@ def estimate_shape(nbrs: Mapping[int, Mapping[int, float]], headings: Mapping[in
                    shape=(m + 1, m + 1)).tocsc()
     lu = splu(K, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, relax=2, panel_size=10,
               options=dict(SymmetricMode=True))
-    sol = lu.solve(np.append(w * g, 0.0))[:m].reshape(-1, 2)
+    sol = lu.solve(np.append(w * g + A.T @ prior_rhs, 0.0))[:m].reshape(-1, 2)
     col = dict(zip(order, range(len(order))))
     ratios = []
     for a, b, d in known:
