@@ -17,16 +17,19 @@ def eprint(*a):
     print(*a, file=sys.stderr, flush=True)
 
 
-def run_configs(description: str, run, argv=None) -> list[dict]:
+def run_configs(description: str, run, argv=None, add_args=None) -> list[dict]:
     """Parse ``configs... [--seeds ...] [--timeout S]`` (every config in configs/ but
     mixed.toml when none is named) and return ``run(config, seed, timeout)`` for each pair,
-    with progress on stderr."""
+    with progress on stderr. ``add_args(parser)``: the bench's own flags; ``run`` is then
+    called with the parsed arguments as a fourth argument."""
     import argparse
     from pathlib import Path
     ap = argparse.ArgumentParser(description=description)
     ap.add_argument("configs", nargs="*")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
     ap.add_argument("--timeout", type=float, default=3000.0, help="wall seconds per run")
+    if add_args is not None:
+        add_args(ap)
     a = ap.parse_args(argv)
     root = Path(__file__).resolve().parents[1]
     configs = a.configs or sorted(str(p) for p in (root / "configs").glob("*.toml")
@@ -35,7 +38,7 @@ def run_configs(description: str, run, argv=None) -> list[dict]:
     runs = []
     for k, (c, s) in enumerate(pairs):
         eprint(f"[{k + 1}/{len(pairs)}] {Path(c).stem} seed {s} ...")
-        runs.append(run(c, s, a.timeout))
+        runs.append(run(c, s, a.timeout) if add_args is None else run(c, s, a.timeout, a))
     return runs
 
 
