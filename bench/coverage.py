@@ -16,9 +16,9 @@ for every run): certified with ground-truth coverage >= 99.5%; robots_used <= 1.
 euler_bound; simulated time per robot used <= 5 s. Each run also reports the push's own
 floor of time per robot (``push_floor_s``: its mean move plus its mean entry, as the
 coordinator's Complex carries them: about the pace at which robots leave a source, not a
-proven bound, since an entry may overlap the move before it) and the time per robot over it. Issue 6's (ratio_same_spacing <= 1.10
-open_room, <= 1.15 structured; ratio <= 1.35 open_room; cycles <= 0.5 x robots) are printed
-per run too. The last table has one row per config and seed, each target marked ok/MISS.
+proven bound, since an entry may overlap the move before it) and the time per robot over
+it. Issue 6's (ratio_same_spacing <= 1.10 open_room, <= 1.15 structured; ratio <= 1.35
+open_room; cycles <= 0.5 x robots) are printed per run too. The last table has one row per config and seed, each target marked ok/MISS.
 """
 from __future__ import annotations
 

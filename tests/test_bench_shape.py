@@ -28,7 +28,7 @@ def test_a_similar_copy_has_no_local_error(angle, scale, dx, dy, n):
     E = scale * T @ np.array([[c, -s], [s, c]]).T + [dx, dy]
     err, k = local_errors(E, T, 2.5)
     assert err.max() < 1e-9
-    assert k == np.float64(k) and abs(k * scale - 1.0) < 1e-9
+    assert abs(k * scale - 1.0) < 1e-9        # the fit undoes the scale
 
 
 def test_a_part_at_the_wrong_scale_is_found_and_a_drift_is_not():

@@ -216,8 +216,8 @@ def estimate_shape(nbrs: Mapping[int, Mapping[int, float]], headings: Mapping[in
     weakly to that length (``EDGE_PRIOR``: a part hinged on one robot, or joined by a
     chain, has a scale the bearings leave free); the scale is then the median of known
     length / estimated length over the known pairs (robust to pairs that drifted since),
-    or ``default_edge`` without any. Only the
-    connected component of ``root`` (default: the lowest vertex) is returned.
+    or ``default_edge`` without any. Only the connected component of ``root`` (default:
+    the lowest vertex) is returned.
     Up to ``_DENSE_MAX`` vertices by the dense normal equations (``_estimate_shape_dense``),
     above by a sparse bordered system with the same solution.
     """
