@@ -3,8 +3,10 @@ the tiny kinematic simulator in test_agent_kinematics.py."""
 from __future__ import annotations
 
 import math
+import random
 
 import pytest
+from hypothesis import assume, given, settings, strategies as st
 
 from swarmcover.agents.behaviours import Behaviour
 from swarmcover.agents.params import AgentParams
@@ -148,6 +150,53 @@ def test_deploy_open_loop_without_landmarks():
     assert beh.task_state == "done"
     x, y, _ = sim.pose[ME]
     assert abs(math.hypot(x, y) - 0.4) < 0.004 and abs(math.atan2(y, x) - 0.5) < 1e-6
+
+
+def _jittered_patch(rng, s=0.85, jitter=0.03):
+    """Three rows of four static robots on a triangular lattice of spacing s (m), each
+    moved by Gaussian jitter (std, m); ids 1..12."""
+    pts = {}
+    for r in range(3):
+        for c in range(4):
+            x = c * s + (s / 2 if r % 2 else 0.0)
+            y = r * s * math.sqrt(3) / 2
+            pts[1 + 4 * r + c] = (x + rng.gauss(0, jitter), y + rng.gauss(0, jitter), 0.0)
+    return pts
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 10_000), nref=st.sampled_from([2, 3]), margin=st.sampled_from([1, 6]))
+def test_the_sight_loss_stop_holds_spacing_near_rv_on_a_jittered_patch(seed, nref, margin):
+    """Issue 19: scale correction ("stop when about to lose sight", spec 4.6) drives a robot
+    just placed above a jittered patch away from its references until one is lost, then
+    back in steps of 0.02 rv until all are in view, then ``margin`` steps more. Under 0.5 deg
+    bearing noise it ends with every reference in view (no edge lost) and its farthest
+    reference within [rv - (margin + 1) x 0.02 rv - 0.01, rv): one step of margin holds
+    0.97-0.99 rv, the default six 0.88-0.94 rv."""
+    rng = random.Random(seed)
+    pts = _jittered_patch(rng)
+    top = 2 * 0.85 * math.sqrt(3) / 2
+    x0 = 1.2 + rng.uniform(-0.2, 0.2) if nref == 2 else 1.7 + rng.uniform(-0.05, 0.05)
+    y0 = top + (0.6 if nref == 2 else 0.35)
+    refs = sorted(pts, key=lambda k: math.hypot(pts[k][0] - x0, pts[k][1] - y0))[:nref]
+    assume(all(math.hypot(pts[k][0] - x0, pts[k][1] - y0) < 0.97 for k in refs))
+    sim = world(me=(x0, y0, 0.0), lms=pts, rv=1.0, noise_deg=0.5, seed=seed)
+    p = AgentParams(scale_margin_steps=margin)
+    beh = Behaviour(p, ME)
+    beh.on_task(task("deploy", vertex=50, landmarks=refs,
+                     bearings=bearings_from(sim, (x0, y0), refs), scale_correct=True))
+    modes = set()
+
+    def over():
+        modes.add(beh.mode)
+        return beh.task_state != "running"
+    assert run(beh, sim, ME, 4000, until=over)
+    assert beh.task_state == "done", beh.reason
+    assert {"scale_out", "scale_back"} <= modes
+    assert set(refs) <= set(sim.sense(ME).ids)                 # no edge lost
+    far = max(sim.dist(ME, pts[k][:2]) for k in refs)
+    low = 1.0 - (margin + 1) * p.scale_step_rv - 0.01
+    assert low <= far < 1.0, (far, low)
 
 
 def test_deploy_single_landmark_backs_up_when_link_lost():
