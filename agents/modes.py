@@ -296,7 +296,8 @@ class Home(ModeState):
             self.lost_since = None
         if not vis:
             return Tick()
-        arrived = self.stop.update(bearing_errors(vis, goal, psi))
+        arrived = self.stop.update(bearing_errors(vis, goal, psi),
+                                   {l: goal[l] + psi for l in vis} if p.arrive_offset else None)
         emax = self.stop.max_error()
         if self.err0 is None:
             self.err0 = max(emax, 2 * p.arrive)

@@ -35,6 +35,9 @@ class AgentParams:
     g0: float = 0.3                  # gain saturation knee: K = v_max / max(|g|, g0)
     arrive_deg: float = 1.5          # stop when every filtered bearing error < this ...
     arrive_ticks: int = 10           # ... for this many consecutive ticks
+    arrive_offset: bool = True       # ... and so does the offset they put the robot at (x
+                                     # landmark distance): two landmarks 60 deg apart
+                                     # left it 2.3 cm off, 1.3 cm with this
     error_alpha: float = 0.3         # low-pass weight of new bearing-error samples (stop rule)
     lost_timeout_s: float = 2.0      # fail "lost landmarks" after this long with < 2 in view
     # holding (station keeping on the recorded snapshot)

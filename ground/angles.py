@@ -88,3 +88,13 @@ def circmean(angles: Iterable[float]) -> float | None:
 def resultant(angles: Iterable[float]) -> float:
     """Mean resultant length in [0, 1] (1: all equal, ~0: spread evenly); 0 if empty."""
     return circular_mean(angles)[1]
+
+
+def bearing_spread(angles: Iterable[float]) -> float:
+    """How well landmarks seen at these bearings (rad) fix the observer's position: the
+    determinant of the sum of the bearings' unit normals' outer products, which is the sum
+    over pairs of sin^2 of their difference. 0 when all lie on one line (one bearing, or
+    opposite ones: a step along that line changes none of them); 0.25 for two bearings
+    30 deg apart; 0.75 for two 60 deg apart; 2.25 for three 120 deg apart."""
+    a = list(angles)
+    return sum(math.sin(x - y) ** 2 for i, x in enumerate(a) for y in a[:i])

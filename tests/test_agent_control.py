@@ -7,7 +7,7 @@ import math
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from swarmcover.agents.control import (FrameTracker, StopRule, away_direction, blocks, bearing_errors,
+from swarmcover.agents.control import (FrameTracker, StopRule, away_direction, bearing_offset, blocks, bearing_errors,
                             circmean, diffdrive, frame_psi, heading_offset, homing_gradient,
                             homing_velocity, slide, snapshot_offsets, wrap)
 
@@ -174,3 +174,43 @@ def test_bearing_errors_and_stop_rule_hysteresis_free_count():
     for _ in range(200):
         arrived = rule.update({k: math.radians(r.gauss(0, 1.0)) for k in range(6)}) or arrived
     assert arrived
+
+
+@settings(max_examples=60, deadline=None)
+@given(dirs=st.lists(angles, min_size=2, max_size=6), dx=st.floats(-0.05, 0.05),
+       dy=st.floats(-0.05, 0.05), d=st.floats(0.4, 1.0))
+def test_bearing_offset_recovers_a_small_step_from_its_bearing_errors(dirs, dx, dy, d):
+    """Landmarks at distance d (m) around a goal; the robot a small step (dx, dy) off it.
+    bearing_offset gives the step's length over d from the bearing errors alone (within 10%
+    when the landmarks spread, det of sum n n^T = sum sin^2 of their pairwise angles >=
+    0.2; a step of 5% of d), or None when they do not fix a point (in line: det < 0.05)."""
+    lms = {k: (d * math.cos(a), d * math.sin(a)) for k, a in enumerate(dirs)}
+    desired = {k: bearing((0.0, 0.0), p) for k, p in lms.items()}
+    errs = bearing_errors({k: bearing((dx, dy), p) for k, p in lms.items()}, desired)
+    off = bearing_offset(errs, desired)
+    spread = sum(math.sin(a - b) ** 2 for i, a in enumerate(dirs) for b in dirs[:i])
+    if off is None:
+        assert spread < 0.05 + 1e-9
+        return
+    assert spread >= 0.05 - 1e-9
+    true = math.hypot(dx, dy) / d
+    if spread >= 0.2:
+        assert abs(off - true) <= 0.1 * true + 1e-4
+
+
+def test_two_landmarks_do_not_stop_a_robot_off_their_bisector():
+    """Two landmarks 60 deg apart, 0.85 m off; the robot 2.5 cm along their bisector from
+    the goal: each bearing is off 0.85 deg, under the 1.5 deg of the stop rule, but the
+    offset they imply is 1.7 deg. The rule with the landmarks' directions keeps homing;
+    without them it would stop there. Three landmarks 120 deg apart: both arrive."""
+    tol = math.radians(1.5)
+    for lms, step, stops in (({1: 0.0, 2: PI / 3}, 0.025, False),
+                             ({1: 0.0, 2: 2 * PI / 3, 3: -2 * PI / 3}, 0.01, True)):
+        pts = {k: (0.85 * math.cos(a), 0.85 * math.sin(a)) for k, a in lms.items()}
+        mid = circmean(list(lms.values()))
+        at = (step * math.cos(mid), step * math.sin(mid)) if len(lms) == 2 else (step, 0.0)
+        errs = bearing_errors({k: bearing(at, p) for k, p in pts.items()}, lms)
+        assert max(abs(e) for e in errs.values()) < tol
+        plain, geo = StopRule(tol, 3), StopRule(tol, 3)
+        assert any(plain.update(errs) for _ in range(10))
+        assert any(geo.update(errs, lms) for _ in range(10)) is stops

@@ -7,9 +7,11 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import given, settings, strategies as st
 
-from swarmcover.ground.angles import PI, circmean, circular_mean, side, side_array, wrap, wrap_array
+from swarmcover.ground.angles import (PI, bearing_spread, circmean, circular_mean, side, side_array,
+                                      wrap, wrap_array)
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("agents", "bus", "coordinator", "ground", "hwbridge", "swarmcover", "viz", "world", "bench")
@@ -17,6 +19,7 @@ PACKAGES = ("agents", "bus", "coordinator", "ground", "hwbridge", "swarmcover", 
 ONE_HOME = {
     "wrap": "ground/angles.py", "wrap_array": "ground/angles.py", "_wrap": None,
     "circmean": "ground/angles.py", "circular_mean": "ground/angles.py", "circ_mean": None,
+    "bearing_spread": "ground/angles.py",
 }
 
 angles = st.floats(-1e4, 1e4, allow_nan=False)
@@ -179,3 +182,17 @@ def test_scalar_polygon_forms_agree_with_the_world_s_array_forms(rays, points):
         assert math.isclose(edge_distance(x, y, poly), dk, rel_tol=1e-9, abs_tol=1e-9)
         if dk > 1e-6:
             assert point_in_polygon(x, y, poly) == bool(ik), (x, y)
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.lists(st.floats(-PI, PI, allow_nan=False), max_size=7))
+def test_bearing_spread_is_the_determinant_of_the_bearing_normals_gram_matrix(angles):
+    """sum over pairs of sin^2 of the difference = det(sum n n^T), n the unit normals:
+    zero with fewer than two bearings, and for bearings on one line (opposite too)."""
+    N = np.array([[-math.sin(a), math.cos(a)] for a in angles]).reshape(-1, 2)
+    assert bearing_spread(angles) == pytest.approx(float(np.linalg.det(N.T @ N)), abs=1e-9)
+    if angles:
+        a = angles[0]
+        assert bearing_spread([a, a + PI, a, wrap(a - PI)]) == pytest.approx(0.0, abs=1e-12)
+    assert bearing_spread([0.0, PI / 6]) == pytest.approx(0.25)
+    assert bearing_spread([0.0, 2 * PI / 3, -2 * PI / 3]) == pytest.approx(2.25)
