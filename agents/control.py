@@ -63,13 +63,17 @@ def homing_velocity(bearings: Mapping[int, float], desired: Mapping[int, float],
     return k * gx, k * gy
 
 
+FIX_SPREAD = 0.05   # ground.angles.bearing_spread under which bearings fix no point: two
+                    # landmarks under 13 deg apart (or opposite), one alone
+
+
 def bearing_offset(errors: Mapping[int, float], directions: Mapping[int, float]) -> float | None:
     """How far the bearing errors put the robot from its goal, in units of the landmarks'
     distance (taken equal; rad-like, comparable with a bearing error): the least-squares
     offset x with e_l = -n_l . x, n_l the unit normal of landmark l's desired bearing. None
     when the landmarks do not fix a point (fewer than two, or all in line)."""
     seen = [l for l in errors if l in directions]
-    if bearing_spread(directions[l] for l in seen) < 0.05:   # two landmarks under 13 deg apart
+    if bearing_spread(directions[l] for l in seen) < FIX_SPREAD:
         return None
     sxx = sxy = syy = bx = by = 0.0
     for l in seen:

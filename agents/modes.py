@@ -19,7 +19,8 @@ from collections import deque
 from dataclasses import dataclass
 from enum import StrEnum
 
-from .control import FrameTracker, StopRule, bearing_errors, circmean, homing_velocity, wrap
+from .control import (FIX_SPREAD, FrameTracker, StopRule, bearing_errors, bearing_spread, circmean,
+                      homing_velocity, wrap)
 from .params import AgentParams
 from .perception import Perception
 
@@ -280,14 +281,20 @@ class Home(ModeState):
         psi = see.psi(self.frame)
         vis = {l: b for l, b in see.seen.items() if l in goal}
         need = min(2, len(goal))
+        few = len(vis) < need
+        if (goal and self.phase is Phase.GOTO and self.creep_dist > 0
+                and see.advance - self.mark < self.creep_dist
+                and (few or bearing_spread(goal[l] for l in vis) < FIX_SPREAD)):
+            # the landmarks in view do not fix the target: too few (it creeps, slowly,
+            # until enough come into view), or all in line with it (one bearing fixes a
+            # ray, and in single file the mover saw the target's bearings from its start
+            # already: it drives, at the deploy speed). A goto with a direction hint (the
+            # bearing of the target vertex seen from the start) goes along it open loop, at
+            # most ``distance`` (spec 4.6, "only one landmark"), then homes on what it sees
+            self.lost_since = None
+            speed = p.scale_speed_frac if few else p.deploy_speed_frac
+            return drive(speed * p.v_max, wrap(self.creep_dir + psi))
         if len(vis) < need or not goal:
-            # too few landmarks in view: a goto with a direction hint (the bearing of the
-            # target vertex seen from the start) creeps along it, at most ``distance``, until
-            # enough of the target's landmarks come into view
-            if (goal and self.phase is Phase.GOTO and self.creep_dist > 0
-                    and see.advance - self.mark < self.creep_dist):
-                self.lost_since = None
-                return drive(p.scale_speed_frac * p.v_max, wrap(self.creep_dir + psi))
             if self.lost_since is None:
                 self.lost_since = see.t
             if not goal or see.t - self.lost_since > p.lost_timeout_s:

@@ -406,3 +406,19 @@ def test_a_goto_on_two_landmarks_stops_nearer_its_vertex_with_the_offset_rule():
     plain = sum(miss(s, False) for s in range(12)) / 12
     offset = sum(miss(s, True) for s in range(12)) / 12
     assert plain > 0.018 and offset < 0.6 * plain, (plain, offset)
+
+
+@pytest.mark.parametrize("lms", [{1: (-0.9, 0.0, 0.0)},
+                                 {1: (-0.9, 0.0, 0.0), 2: (1.8, 0.0, 0.0)}])
+def test_a_goto_on_landmarks_in_line_with_its_target_drives_the_hinted_distance(lms):
+    """Single file: the mover stands at its vertex 0.9 m from its target, and every landmark
+    it is given lies on that line (the robot ahead, and the one behind). Their bearings from
+    the target are those from the start, so homing alone 'arrived' without moving (pillar_hall
+    seed 0: rows of robots reported moves done 0.9 m short, a whole vertex). With the
+    coordinator's direction hint it drives the hinted distance open loop first (spec 4.6)."""
+    sim = world(me=(0.9, 0.0, 0.0), lms=lms, rv=2.0, noise_deg=0.5)
+    beh = Behaviour(AgentParams(), ME)
+    beh.on_task(goto_task(sim, (0.0, 0.0), lms=tuple(lms), direction=PI, distance=0.9))
+    assert run(beh, sim, ME, 2000, until=lambda: beh.task_state != "running")
+    assert beh.task_state == "done", beh.reason
+    assert sim.dist(ME, (0.0, 0.0)) < 0.03, sim.pose[ME]
