@@ -320,6 +320,10 @@ class Home(ModeState):
             self.stall_best = emax
             self.stall_t = see.t
         elif see.t - self.stall_t > p.stall_s and len(vis) >= need:
+            if emax < p.arrive:
+                # every bearing is within the tolerance and only the offset test is not
+                # met: the robot is as near as these bearings tell, not stalled
+                return Tick(progress=progress, outcome=Outcome.ARRIVED)
             return Tick(progress=progress, outcome=Outcome.STALLED)
         ux, uy = homing_velocity(vis, goal, p.v_max, p.g0, psi)
         return Tick(ux, uy, progress=progress)

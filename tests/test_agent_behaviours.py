@@ -422,3 +422,20 @@ def test_a_goto_on_landmarks_in_line_with_its_target_drives_the_hinted_distance(
     assert run(beh, sim, ME, 2000, until=lambda: beh.task_state != "running")
     assert beh.task_state == "done", beh.reason
     assert sim.dist(ME, (0.0, 0.0)) < 0.03, sim.pose[ME]
+
+
+def test_a_goto_held_off_its_target_within_the_bearing_tolerance_arrives_not_stalls():
+    """Two landmarks 30 deg either side of the direction of travel; a wall stops the robot
+    2.5 cm short of its target. Every bearing is then within 1.5 deg but the offset they
+    imply is not, and it cannot shrink: after stall_s the goto ends done (as near as these
+    bearings tell), not failed "stalled" as a robot that is off by more than the tolerance."""
+    lms = {1: (0.85 * math.cos(PI / 6), 0.85 * math.sin(PI / 6), 0.0),
+           2: (0.85 * math.cos(PI / 6), -0.85 * math.sin(PI / 6), 0.0)}
+    x_wall = -0.025 + 0.06
+    sim = world(me=(-0.5, 0.0, 0.0), lms=lms, rv=2.0, noise_deg=0.2,
+                walls=[((x_wall, -1.0), (x_wall, 1.0))])
+    beh = Behaviour(AgentParams(), ME)
+    beh.on_task(goto_task(sim, (0.0, 0.0), lms=(1, 2)))
+    assert run(beh, sim, ME, 3000, until=lambda: beh.task_state != "running")
+    assert beh.task_state == "done", beh.reason
+    assert abs(sim.pose[ME][0] + 0.025) < 0.01, sim.pose[ME]
