@@ -255,9 +255,11 @@ class Home(ModeState):
     """Visual homing on ``goal`` (landmark -> bearing, rad, in ``frame``), for ``phase``.
 
     Fails ("lost landmarks") when fewer than 2 (or all, if fewer) goal landmarks stay out of
-    view for lost_timeout_s; a goto with a direction hint first creeps along
-    ``creep_dir`` (rad, reference frame) for at most ``creep_dist`` (m) until enough come
-    into view. Stalls when the largest error has not shrunk by stall_deg for stall_s."""
+    view for lost_timeout_s; a goto with a direction hint first goes along ``creep_dir``
+    (rad, reference frame) for at most ``creep_dist`` (m): slowly until enough come into
+    view, at the deploy speed while those in view fix no point (one, or all in line with
+    the target). Stalls when the largest error has not shrunk by stall_deg for stall_s
+    (arrives instead when that error is within the arrival tolerance)."""
     mode = Mode.HOME
 
     def __init__(self, goal: dict[int, float], phase: Phase, frame: FrameTracker | None,
