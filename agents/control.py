@@ -72,19 +72,20 @@ def bearing_offset(errors: Mapping[int, float], directions: Mapping[int, float])
     distance (taken equal; rad-like, comparable with a bearing error): the least-squares
     offset x with e_l = -n_l . x, n_l the unit normal of landmark l's desired bearing. None
     when the landmarks do not fix a point (fewer than two, or all in line)."""
-    seen = [l for l in errors if l in directions]
-    if bearing_spread(directions[l] for l in seen) < FIX_SPREAD:
-        return None
     sxx = sxy = syy = bx = by = 0.0
-    for l in seen:
-        t, e = directions[l], errors[l]
+    for l, e in errors.items():
+        t = directions.get(l)
+        if t is None:
+            continue
         nx, ny = -math.sin(t), math.cos(t)
         sxx += nx * nx
         sxy += nx * ny
         syy += ny * ny
         bx -= nx * e
         by -= ny * e
-    det = sxx * syy - sxy * sxy   # = bearing_spread
+    det = sxx * syy - sxy * sxy   # = ground.angles.bearing_spread of the directions, in O(n)
+    if det < FIX_SPREAD:
+        return None
     x = (syy * bx - sxy * by) / det
     y = (sxx * by - sxy * bx) / det
     return math.hypot(x, y)

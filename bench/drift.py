@@ -93,14 +93,17 @@ def _plot(shots: list[dict], wm, path: str, title: str, panels: int = 4) -> None
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from scipy.spatial import cKDTree
+
+    from swarmcover.bus.messages import WorldInfo
+    from swarmcover.viz.figures import draw_map
+    info = WorldInfo(name=title, rv=1.0, robot_radius=0.06, dt=0.05, mode="lockstep", seed=0,
+                     **wm.info_fields())           # the map only: walls, obstacles, sources
     pick = sorted({round(k * (len(shots) - 1) / panels) for k in range(1, panels + 1)})
     fig, axs = plt.subplots(1, len(pick), figsize=(4.5 * len(pick), 4), squeeze=False)
     cmap = plt.get_cmap("RdYlGn")
     for ax, k in zip(axs[0], pick):
         sh = shots[k]
-        for ring in [wm.boundary, *wm.obstacles]:
-            R = np.array([*ring, ring[0]], float)
-            ax.plot(R[:, 0], R[:, 1], "k-", lw=1)
+        draw_map(ax, info)
         pos = sh["pos"]
         for j, (a, b) in enumerate(sh["edges"]):
             if a in pos and b in pos:
