@@ -102,6 +102,12 @@ class CoordinatorConfig:
                                    # side later). Seed 0, in-process, off -> on: corridor_doors
                                    # 77 robots / 98 cycles / 1,935 s -> 75 / 85 / 1,785 s,
                                    # small 33 / 31 / 746 s -> 34 / 27 / 582 s
+    free_probes_rolling: bool = True  # free probes also start within a cycle, whenever one of
+                                   # its jobs ends and the fence (recomputed with the evidence
+                                   # since) offers a probe at a robot off every push path and
+                                   # not next to one or to a probe still out; before, only at
+                                   # the cycle's start (two neighbours never probe at once, so
+                                   # a wall's robots probed one in two per cycle)
     sweeps_last: bool = True       # pushes go to deployments that may leave a robot while the
                                    # fence offers any; wall sweeps (which mostly come home) run
                                    # beside them as free probes, and by pushes once only sweeps

@@ -213,6 +213,7 @@ class Deployer:
                 self.pending_holds.pop(rid)
         for job in self.jobs:
             self.pushes.advance(job, now)
+        self.pushes.roll_free_probes(now)
         if (self.pushes.finished and not self.pending_holds
                 and self.placement.all_settled(self.roster)):
             self.jobs = []

@@ -250,34 +250,68 @@ def _add_free_probes(snap: Snapshot, params: TopologyParams, cx, fence, plan: Cy
     """Append free probes to ``plan.jobs`` (see plan_cycle's free_probes): at most
     ``max_paths``, lowest frontier vertex first, each at a vertex that is neither a mover
     (push path, source, earlier free prober) nor a neighbour of one."""
-    from .topology.paths import PushPath
-
     movers: set[int] = set(int(s) for s in snap.sources)
     for job in plan.jobs:
         movers.update(int(v) for v in job.path)
+    plan.jobs.extend(_free_probe_specs(snap, params, cx, fence, movers, vid, max_paths,
+                                       returned))
+
+
+def _free_probe_specs(snap: Snapshot, params: TopologyParams, cx, fence, movers: set[int],
+                      vid: int, max_n: int, returned, skip=frozenset()) -> list[JobSpec]:
+    """Free probes (JobSpecs with ``free``, new vertex ids from ``vid``): at most ``max_n``,
+    lowest frontier vertex first, each at a vertex of ``cx`` that is neither in ``movers``
+    nor next to one, nor next to an earlier one, nor in ``skip``."""
+    from .topology.paths import PushPath
+
+    movers = set(movers)
     near: set[int] = set(movers)
     for v in movers:
         if v in cx:
             near.update(int(x) for x in cx.neighbours(v))
     fence = _without_probes(fence, frozenset(returned))
-    n_free = 0
+    out: list[JobSpec] = []
     for f in sorted(fence.deployments):
-        if n_free >= max_paths:
+        if len(out) >= max_n:
             break
         f = int(f)
-        if f in near or f not in cx or f not in snap.occupant:
+        if f in near or f in skip or f not in cx or f not in snap.occupant:
             continue
         probes = [d for d in fence.deployments[f] if d.kind == "probe" and d.edge is not None]
         if not probes:
             continue
         spec = _job_spec(snap, params, PushPath((f,), probes[0], 0.0), vid, True, False)
         spec.free = True
-        plan.jobs.append(spec)
+        out.append(spec)
         vid += 1
-        n_free += 1
         movers.add(f)
         near.add(f)
         near.update(int(x) for x in cx.neighbours(f))
+    return out
+
+
+def more_free_probes(snap: Snapshot, params: TopologyParams, *, movers: set[int],
+                     skip: set[int], test_drive_failures: dict[int, list[float]],
+                     new_vertex: int, max_n: int, evidence: dict | None = None,
+                     returned=frozenset()) -> list[JobSpec]:
+    """Free probes to start within a running cycle, once some of its jobs are over
+    (``[coordinator] free_probes_rolling``).
+
+    At the start of a cycle a free probe goes only where neither f nor a neighbour of f is
+    a mover, so two neighbours never probe at once; a wall's robots probed one in two per
+    cycle, and the rest waited for the push that was still running (tiny seed 0: nine wall
+    sweeps in a row, 124 s, in one cycle). Here the fence is recomputed on the cycle's
+    snapshot with the evidence gathered since, and probes go where it still offers one.
+
+    movers: the vertices whose robots are not to be relied on: the sources, every push
+    path of the cycle (done or not: its robots stand where they homed, not where the
+    snapshot has them), the free probes still out, and every vertex whose robot is gone or
+    elsewhere. skip: vertices that already probed free this cycle. No probe goes to a
+    mover or a neighbour of one, so its landmarks are where the snapshot has them.
+    """
+    cx, fence = _complex_and_fence(snap, params, test_drive_failures, evidence)
+    return _free_probe_specs(snap, params, cx, fence, movers, new_vertex, max_n, returned,
+                             skip=frozenset(skip))
 
 
 def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: list[JobSpec],

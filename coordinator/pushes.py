@@ -19,7 +19,7 @@ from .config import CoordinatorConfig, PushMode
 from .jobs import (FINISHED, OVER, PushJob, Step, StepName, StepState, drive_failures,
                    evidence_kwargs, make_job)
 from .placement import Placement
-from .planner import JobSpec, Snapshot, replan_push
+from .planner import JobSpec, Snapshot, more_free_probes, replan_push
 from .roster import Roster
 from .tasks import TaskBuilder, td_length
 from .topology.evidence import Evidence
@@ -48,6 +48,7 @@ class Pushes:
         self.done_s: dict[str, list[float]] = {}   # step name -> [steps done, their sim s]
         self._snapshot: Snapshot | None = None
         self.tasks: TaskBuilder | None = None
+        self._rolled: tuple[int, int] = (-1, -1)   # (cycle, jobs over) last rolled at
 
     @property
     def snapshot(self) -> Snapshot | None:
@@ -405,6 +406,46 @@ class Pushes:
         if spec.distance is not None or self.params.d_td >= self.cfg.d0 - 1e-3 * self.cfg.rv:
             return "placed by the test drive"
         return ""
+
+    def roll_free_probes(self, now: float) -> None:
+        """Start free probes within the running cycle (``free_probes_rolling``): each time
+        one of its jobs is over, while a push is still running, at the robots the fence
+        still offers a probe to and that are off every push path, every probe still out and
+        every robot that left its vertex, and next to none of them
+        (:func:`coordinator.planner.more_free_probes`). A vertex probes free at most once a
+        cycle. Nothing starts once the pushes are over: the cycle ends, and the next one
+        plans its free probes afresh."""
+        snap = self.snapshot
+        if snap is None or not (self.cfg.free_probes and self.cfg.free_probes_rolling):
+            return
+        over = sum(1 for j in self.jobs if j.finished)
+        if (self.cycle, over) == self._rolled:
+            return
+        self._rolled = (self.cycle, over)
+        if over == 0 or all(j.finished or j.spec.free for j in self.jobs):
+            return
+        out = [j for j in self.jobs if j.spec.free and not j.finished]
+        room = self.cfg.max_paths - len(out)
+        if room <= 0:
+            return
+        pl = self.placement
+        movers = set(snap.sources)
+        for j in self.jobs:
+            if not (j.spec.free and j.finished):
+                movers.update(j.spec.path)
+        movers |= {v for v, rid in snap.occupant.items()
+                   if not self.roster.live(rid) or rid in pl.left or pl.vertex_of.get(rid) != v}
+        specs = more_free_probes(
+            snap, self.params, movers=movers,
+            skip={j.spec.path[-1] for j in self.jobs if j.spec.free},
+            test_drive_failures=drive_failures(self.evidence, snap), new_vertex=pl.next_vertex,
+            max_n=room, evidence=evidence_kwargs(self.evidence, snap),
+            returned=self.evidence.returned_probes(snap.occupant))
+        for spec in specs:
+            pl.next_vertex += 1
+            self.jobs.append(make_job(spec, snap.occupant))
+            log.info("cycle %d: free probe from vertex %d within the cycle (%s)", self.cycle,
+                     spec.path[-1], spec.frontier_edge)
 
     # ------------------------------------------------------------------ touches
     def _test_drive_failed(self, job: PushJob, td: Step) -> None:

@@ -211,3 +211,50 @@ def test_a_free_probe_that_touched_books_evidence_and_tries_its_next_probe():
     dep.pushes.advance(job, 2.0)
     (td2,) = _tasks(dep)
     assert td2.kind == "test_drive" and td2.robot == rid and td2.vertex == f
+
+
+def test_a_free_probe_starts_within_the_cycle_once_its_neighbours_probe_is_over():
+    """``free_probes_rolling``: at the cycle's start vertex 1 may not probe (its neighbour
+    0 does, and would home on it); once 0's probe is over and while the push still runs, 1
+    probes in the same cycle. A vertex probes free once a cycle, and nothing starts once
+    the pushes are over."""
+    snap = _snap()
+    plan = _plan(snap, free_probes=True)
+    assert [(j.path, j.free) for j in plan.jobs] == [([3], False), ([0], True)]
+
+    def cycle(cfg):
+        dep, _ = _deployer(snap, cfg)
+        dep.jobs = [make_job(s, snap.occupant) for s in plan.jobs]
+        dep.next_vertex = 20
+        return dep, dep.jobs[0], dep.jobs[1]
+
+    dep, push, free = cycle(CoordinatorConfig(sweep=False))
+    dep.pushes.roll_free_probes(1.0)
+    assert len(dep.jobs) == 2                     # nothing over yet: nothing new
+    free.cancel("its probes are done")
+    dep.pushes.roll_free_probes(2.0)
+    (new,) = dep.jobs[2:]
+    assert new.spec.free and new.spec.path == [1] and new.spec.kind == "probe"
+    assert new.spec.new_vertex == 20 and dep.next_vertex == 21
+    # its landmarks hold still: f and its neighbours are off the push and off every probe
+    # still out
+    assert not ({1} | set(snap.nbrs[1])) & (set(push.spec.path) | {3})
+    dep.out.actions = []
+    dep.pushes.advance(new, 2.0)
+    (td,) = _tasks(dep)
+    assert td.kind == "test_drive" and td.robot == snap.occupant[1]
+    # vertex 0 probed this cycle already: not again, though its neighbour's probe is over
+    new.cancel("its probes are done")
+    dep.pushes.roll_free_probes(3.0)
+    assert len(dep.jobs) == 3
+    # once the push is over, nothing starts: the cycle ends and the next plans afresh
+    dep, push, free = cycle(CoordinatorConfig(sweep=False))
+    push.cancel("over")
+    free.cancel("over")
+    dep.pushes.roll_free_probes(2.0)
+    assert len(dep.jobs) == 2
+    # off: only the cycle's start offers free probes
+    dep, push, free = cycle(CoordinatorConfig(sweep=False, free_probes_rolling=False))
+    free.cancel("over")
+    dep.pushes.roll_free_probes(2.0)
+    assert len(dep.jobs) == 2
