@@ -108,6 +108,12 @@ class CoordinatorConfig:
                                    # not next to one or to a probe still out; before, only at
                                    # the cycle's start (two neighbours never probe at once, so
                                    # a wall's robots probed one in two per cycle)
+    free_probes_carry: bool = True  # a cycle ends once its pushes are over: free probes still
+                                   # out go on into the next cycle, which plans around them
+                                   # (no path through a prober's vertex or its neighbours, no
+                                   # free probe next to it; the snapshot keeps the prober's
+                                   # edges as they were when it left) and never certifies
+                                   # while one is out. false: the cycle waits for them
     sweeps_last: bool = True       # pushes go to deployments that may leave a robot while the
                                    # fence offers any; wall sweeps (which mostly come home) run
                                    # beside them as free probes, and by pushes once only sweeps

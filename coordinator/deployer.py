@@ -214,9 +214,11 @@ class Deployer:
         for job in self.jobs:
             self.pushes.advance(job, now)
         self.pushes.roll_free_probes(now)
-        if (self.pushes.finished and not self.pending_holds
-                and self.placement.all_settled(self.roster)):
-            self.jobs = []
+        carried = self.pushes.carried()
+        if ((self.pushes.finished or carried) and not self.pending_holds
+                and self.placement.all_settled(self.roster,
+                                               skip=self.pushes.out_robots(carried))):
+            self.jobs = carried
             self.cycle_end_t = now
             self._set_phase(Phase.SETTLE, now)
 
@@ -247,14 +249,41 @@ class Deployer:
         return self.placement.snapshot(self.roster, self.sources)
 
     def _take_snapshot(self) -> Snapshot:
-        snap = self.snapshot = self.build_snapshot()
+        prev, snap = self.snapshot, self.build_snapshot()
+        if prev is not None:
+            self._keep_out_edges(prev, snap)
+        self.snapshot = snap
         return snap
+
+    def _out_vertices(self) -> set[int]:
+        """Vertices whose robots are out on free probes carried from the last cycle."""
+        return {j.spec.path[-1] for j in self.jobs if j.spec.free and not j.finished}
+
+    def _keep_out_edges(self, prev: Snapshot, snap: Snapshot) -> None:
+        """A robot out on a carried free probe comes back to its vertex, homing on the
+        neighbours it saw there, which hold still until it is back (no path may use them):
+        ``snap`` keeps that vertex's edges as ``prev`` had them, in both directions, not as
+        the robot sees them from where it is now."""
+        for f in self._out_vertices():
+            rid = prev.occupant.get(f)
+            if rid is None or snap.occupant.get(f) != rid:
+                continue
+            snap.nbrs[f] = {u: b for u, b in prev.nbrs.get(f, {}).items()
+                            if snap.occupant.get(u) == prev.occupant.get(u)}
+            for v, nb in snap.nbrs.items():
+                if v == f:
+                    continue
+                nb.pop(f, None)
+                if f in prev.nbrs.get(v, {}) and snap.occupant.get(v) == prev.occupant.get(v):
+                    nb[f] = prev.nbrs[v][f]
 
     def _strays(self, snap: Snapshot) -> set[int]:
         """Vertices cut off from every source (coordinator.placement.stray_vertices)."""
         return stray_vertices(snap, len(self.sources))
 
     def _plan(self, now: float) -> None:
+        carried = [j for j in self.jobs if not j.finished]
+        out = self._out_vertices()
         snap = self._take_snapshot()
         strays = self._strays(snap)
         if strays:
@@ -269,7 +298,8 @@ class Deployer:
         run_redundancy = (self.cycle % max(1, self.cfg.redundancy_period) == 0)
         moving: set[int] = set()
         plan = self.plan = self.planner(
-            snap, self.params, cycle=self.cycle, redundancy=run_redundancy or self.final_pass,
+            snap, self.params, cycle=self.cycle,
+            redundancy=(run_redundancy or self.final_pass) and not out,
             test_drive_failures=drive_failures(self.evidence, snap),
             previous_redundant=self.redundant, protected=moving, max_paths=self.cfg.max_paths,
             scale_correct=(self.cfg.scale_correct_period > 0
@@ -278,9 +308,13 @@ class Deployer:
             lattice_spacing=self.cfg.d0 if self.cfg.lattice else None,
             evidence=evidence_kwargs(self.evidence, snap), free_probes=self.cfg.free_probes,
             returned_probes=self.evidence.returned_probes(snap.occupant),
-            sweeps_last=self.cfg.sweeps_last)
+            sweeps_last=self.cfg.sweeps_last, out=frozenset(out))
         self.next_vertex += len(plan.jobs)
         self.redundant = set(plan.redundant)
+        if carried:
+            # nothing is certified while a probe is out: the snapshot holds its vertex's
+            # edges as they were when it left
+            plan.certified = False
         self.out.add(PublishComplex(self._complex_msg(plan, now, "running")))
         if self._pending_failures and plan.certified:
             self.failures_healed += self._pending_failures
@@ -292,6 +326,12 @@ class Deployer:
                     rid = self._spawn(k, now)
                     self.vertex_of[rid] = k
                     self.pending_holds[rid] = k
+            self._set_phase(Phase.EXECUTE, now)
+            return
+        if carried and not plan.frontier and not plan.open_vertices:
+            # nothing left but what the probes still out will tell: wait for them, then
+            # plan (and certify) on what everyone sees
+            self.jobs = carried
             self._set_phase(Phase.EXECUTE, now)
             return
         if not plan.frontier and not plan.open_vertices:
@@ -310,7 +350,7 @@ class Deployer:
             self._stop(f"max_cycles = {self.cfg.max_cycles} reached")
             return
         self.final_pass = False
-        self.jobs = []
+        self.jobs = carried
         feeds: dict[int, PushJob] = {}
         for spec in plan.jobs:
             job = make_job(spec, snap.occupant)

@@ -71,9 +71,12 @@ class Placement:
             out.append(rid)
         return sorted(out)
 
-    def all_settled(self, roster: Roster) -> bool:
-        """Every member's agent reports no running task and a settled state."""
+    def all_settled(self, roster: Roster, skip=()) -> bool:
+        """Every member's agent (but those in ``skip``) reports no running task and a
+        settled state."""
         for rid in self.members(roster):
+            if rid in skip:
+                continue
             st = roster.get(rid).status
             if st.task_state == "running" or st.state not in SETTLED_STATES:
                 return False

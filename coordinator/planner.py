@@ -130,7 +130,8 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
                protected: set, max_paths: int, scale_correct: bool, test_drive: bool,
                next_vertex: int, lattice_spacing: float | None = None,
                evidence: dict | None = None, free_probes: bool = False,
-               returned_probes: frozenset = frozenset(), sweeps_last: bool = False) -> CyclePlan:
+               returned_probes: frozenset = frozenset(), sweeps_last: bool = False,
+               out: frozenset = frozenset()) -> CyclePlan:
     """Decide one cycle. ``next_vertex``: the first unused vertex id (for new positions).
 
     lattice_spacing: when set (rv units) and every robot is holonomic, each new position
@@ -152,6 +153,10 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     proves nothing).
     previous_redundant: redundant vertices found earlier (used as path starts until the
     next redundancy pass). protected: vertices that must not be counted redundant.
+    out: vertices whose robots are still out on free probes of the last cycle
+    (``[coordinator] free_probes_carry``; the snapshot has them where they left): no path
+    uses them or their neighbours (the landmarks they home back on), and no free probe
+    goes to them or next to them.
     """
     from .topology.certificate import certify
     from .topology.paths import plan_pushes
@@ -182,11 +187,13 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     # pushes: vertex-disjoint paths from redundant vertices and sources; a source may feed
     # several paths in one cycle (its new robots enter one after another)
     push_fence = _placing_first(fence) if sweeps_last else fence
+    hold = {int(v) for v in out if v in cx}
+    hold.update(int(x) for v in list(hold) for x in cx.neighbours(v))
     paths = plan_pushes(cx, push_fence, snap.sources, sorted(plan.redundant), params=params,
-                        max_paths=max_paths)
+                        max_paths=max_paths, exclude=hold)
     chosen = list(paths)
     while len(chosen) < max_paths and snap.sources:
-        used = _claimed(cx, [pth.vertices for pth in chosen])
+        used = _claimed(cx, [pth.vertices for pth in chosen]) | hold
         extra = None
         for s in snap.sources:
             cand = plan_pushes(cx, push_fence, [s], (), params=params, max_paths=1,
@@ -210,7 +217,8 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     # neighbours off every mover. With symmetric neighbourhoods both say: f is neither a
     # mover nor next to one. Landmarks may be shared.
     if free_probes:
-        _add_free_probes(snap, params, cx, fence, plan, vid, max_paths, returned_probes)
+        _add_free_probes(snap, params, cx, fence, plan, vid, max_paths, returned_probes,
+                         out=out)
     if lattice_spacing and plan.jobs:
         _place_on_lattice(snap, plan.jobs, float(lattice_spacing), params, test_drive_failures)
     return plan
@@ -246,11 +254,12 @@ def _without_probes(fence, skip):
 
 
 def _add_free_probes(snap: Snapshot, params: TopologyParams, cx, fence, plan: CyclePlan,
-                     vid: int, max_paths: int, returned) -> None:
+                     vid: int, max_paths: int, returned, out=frozenset()) -> None:
     """Append free probes to ``plan.jobs`` (see plan_cycle's free_probes): at most
     ``max_paths``, lowest frontier vertex first, each at a vertex that is neither a mover
-    (push path, source, earlier free prober) nor a neighbour of one."""
-    movers: set[int] = set(int(s) for s in snap.sources)
+    (push path, source, earlier free prober, a prober still ``out``) nor a neighbour of
+    one."""
+    movers: set[int] = set(int(s) for s in snap.sources) | {int(v) for v in out}
     for job in plan.jobs:
         movers.update(int(v) for v in job.path)
     plan.jobs.extend(_free_probe_specs(snap, params, cx, fence, movers, vid, max_paths,

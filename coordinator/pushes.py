@@ -104,6 +104,21 @@ class Pushes:
     def finished(self) -> bool:
         return all(j.finished for j in self.jobs)
 
+    def carried(self) -> list[PushJob]:
+        """The free probes that may go on into the next cycle (``free_probes_carry``): all
+        unfinished ones once every push of the cycle is over, else none. A cycle of free
+        probes alone waits for them (its next plan would find the same probes out)."""
+        if not (self.cfg.free_probes and self.cfg.free_probes_carry):
+            return []
+        pushes = [j for j in self.jobs if not j.spec.free]
+        if not pushes or not all(j.finished for j in pushes):
+            return []
+        return [j for j in self.jobs if not j.finished]
+
+    def out_robots(self, jobs: list[PushJob]) -> set[int]:
+        """The robots of ``jobs`` (free probes) with a step still to do."""
+        return {s.robot for j in jobs for s in j.to_do() if s.robot >= 0}
+
     # ------------------------------------------------------------------ advance
     def _moving(self) -> set[int]:
         """Vertices on the path of a push not aborted (their occupants are moving)."""

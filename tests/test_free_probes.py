@@ -8,15 +8,16 @@ may still take it. Pure cores only: the planner on a snapshot, the deployer fed 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from swarmcover.bus.messages import Status
 from swarmcover.coordinator import build_complex, detect_fence
-from swarmcover.coordinator.actions import SendTask
+from swarmcover.coordinator.actions import PublishComplex, SendTask
 from swarmcover.coordinator.config import CoordinatorConfig
-from swarmcover.coordinator.deployer import Deployer
-from swarmcover.coordinator.jobs import make_job
+from swarmcover.coordinator.deployer import Deployer, Phase
+from swarmcover.coordinator.jobs import StepState, make_job
 from swarmcover.coordinator.roster import Robot
 from swarmcover.coordinator.topology.evidence import Evidence, probe_key
 from swarmcover.coordinator.topology.params import TopologyParams
@@ -258,3 +259,92 @@ def test_a_free_probe_starts_within_the_cycle_once_its_neighbours_probe_is_over(
     free.cancel("over")
     dep.pushes.roll_free_probes(2.0)
     assert len(dep.jobs) == 2
+
+
+def _holding(dep, seq, snap, t, out=None, far=None, task_id=-1):
+    """Every robot of ``snap`` reports at ``t``: holding its vertex with ``snap``'s
+    bearings, but robot ``out``, test-driving (task ``task_id``) and seeing ``far`` (id ->
+    bearing)."""
+    for v, rid in snap.occupant.items():
+        busy = rid == out
+        nb = far if busy else {snap.occupant[u]: b for u, b in snap.nbrs[v].items()}
+        wall = v in snap.contact and not busy
+        dep.on_status(Status(robot=rid, seq=next(seq), t=t,
+                             state="test_driving" if busy else "holding", vertex=v,
+                             contact=wall, contact_bearing=snap.contact.get(v, 0.0),
+                             task_id=task_id if busy else -1,
+                             task_state="running" if busy else "",
+                             nbr_ids=list(nb), nbr_bearings=list(nb.values())))
+
+
+def test_a_free_probe_still_out_goes_on_into_the_next_cycle_which_plans_around_it():
+    """``free_probes_carry``: the cycle ends once its pushes are over. The next plan keeps
+    the prober's edges as they were when it left (not as it sees them from out there), no
+    path uses its vertex or a neighbour (its landmarks home), no free probe goes next to
+    it, and nothing is certified until it is back."""
+    P = DOOR[[3, 0, 1, 2, 4]]        # the deployer's source 0 is vertex 0: renumbered
+    snap = replace(_snap(P, touch={1: 90 * DEG, 2: 90 * DEG}), sources=[0])
+    plans = []
+
+    def planner(s, params, **kw):
+        plans.append((s, kw))
+        if len(plans) == 2:      # "complete": no frontier, certified
+            return replace(plan_cycle(s, params, **kw), frontier=[], open_vertices=set(),
+                           certified=True, jobs=[])
+        return plan_cycle(s, params, **kw)
+
+    dep = Deployer(CoordinatorConfig(sweep=False), sources=[90 * DEG], planner=planner)
+    seq = iter(range(1, 10_000))
+    for v, rid in snap.occupant.items():
+        dep.vertex_of[rid] = v
+    dep.next_vertex = 10
+    _holding(dep, seq, snap, 0.0)
+    dep.snapshot = snap
+    dep.phase, dep.phase_t = Phase.SETTLE, 0.0
+    dep.step(1.0)                                    # plans cycle 0: a push and a probe
+    (s0, kw0), = plans
+    push, free = dep.jobs
+    assert not push.spec.free and free.spec.free and free.spec.path == [1]
+    assert kw0["out"] == frozenset()
+    dep.step(1.1)                                    # both start
+    prober = snap.occupant[1]
+    # the push is over; the prober is out, and sees the world from elsewhere
+    push.cancel("over")
+    for s in push.steps:
+        if s.state == StepState.RUNNING:
+            s.state = StepState.DONE
+    far = {snap.occupant[3]: 0.3, snap.occupant[0]: -2.0}
+    td = free.step("test_drive").task_id
+    _holding(dep, seq, snap, 2.0, out=prober, far=far, task_id=td)
+    dep.step(2.0)
+    assert dep.phase == Phase.SETTLE and dep.jobs == [free]       # carried, not waited for
+    _holding(dep, seq, snap, 3.0, out=prober, far=far, task_id=td)
+    acts = dep.step(3.0)                             # plans cycle 1 around the prober
+    (cx_msg,) = [a.complex for a in acts if isinstance(a, PublishComplex)]
+    assert not cx_msg.certified                      # not even in what it publishes
+    s1, kw1 = plans[1]
+    assert kw1["out"] == frozenset({1}) and not kw1["redundancy"]
+    assert s1.nbrs[1] == snap.nbrs[1]                # its edges as when it left
+    assert all(s1.nbrs[v].get(1) == snap.nbrs[v].get(1) for v in s1.nbrs if v != 1)
+    assert not dep.done and not dep.certified        # "complete", but a probe is out
+    assert dep.jobs == [free] and dep.phase == Phase.EXECUTE
+    # the real plan on that snapshot: nothing uses the prober or its neighbours
+    real = plan_cycle(s1, PROBES, cycle=1, redundancy=False, test_drive_failures={},
+                      previous_redundant=set(), protected=set(), max_paths=4,
+                      scale_correct=False, test_drive=True, next_vertex=30,
+                      free_probes=True, out=frozenset({1}))
+    near1 = {1} | set(s1.nbrs[1])
+    assert real.jobs and all(not near1 & set(j.path) for j in real.jobs)
+    # it is back: the cycle of the carried probe alone ends when it does
+    free.cancel("back home")
+    free.step("test_drive").state = StepState.DONE
+    _holding(dep, seq, snap, 4.0)
+    dep.step(4.0)
+    assert dep.phase == Phase.SETTLE and dep.jobs == []
+    # off: the cycle waits for its free probes
+    dep = Deployer(CoordinatorConfig(sweep=False, free_probes_carry=False),
+                   sources=[90 * DEG])
+    dep.jobs = [push, free]
+    for s in free.steps:
+        s.state = StepState.RUNNING if s.name == "test_drive" else StepState.PENDING
+    assert dep.pushes.carried() == []
