@@ -214,11 +214,11 @@ class Deployer:
         for job in self.jobs:
             self.pushes.advance(job, now)
         self.pushes.roll_free_probes(now)
-        carried = self.pushes.carried()
-        if ((self.pushes.finished or carried) and not self.pending_holds
+        carried = self.pushes.carried(self.plan)
+        if ((self.pushes.finished or carried is not None) and not self.pending_holds
                 and self.placement.all_settled(self.roster,
                                                skip=self.pushes.out_robots(carried))):
-            self.jobs = carried
+            self.jobs = carried or []
             self.cycle_end_t = now
             self._set_phase(Phase.SETTLE, now)
 

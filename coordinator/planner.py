@@ -299,6 +299,46 @@ def _free_probe_specs(snap: Snapshot, params: TopologyParams, cx, fence, movers:
     return out
 
 
+def carryable(edges, sources, targets, probers) -> set[int]:
+    """Which probers (vertices whose robots are out on free probes) may stay out into the
+    next cycle (``[coordinator] free_probes_carry``), in order, greedily: while one is
+    out no path uses its vertex or a neighbour, so none may stay out where that, with the
+    ones before it, would cut every source off from a vertex of ``targets`` (vertices with
+    a deployment) that a path reaches now, its own neighbourhood aside. The others are
+    waited for, as before. edges: the cycle's edges (vertex pairs); sources: vertices.
+
+    In a corridor two robots wide a prober and its neighbours cross it: carried, it held
+    every push of the next cycle out of the corridor beyond (structured seed 0: 24 of the
+    56 plans made with probes out had fewer pushes than the same plan without them)."""
+    nb: dict[int, set[int]] = {}
+    for a, b in edges:
+        nb.setdefault(int(a), set()).add(int(b))
+        nb.setdefault(int(b), set()).add(int(a))
+
+    def reached(blocked: set[int]) -> set[int]:
+        seen = {int(s) for s in sources if int(s) in nb and int(s) not in blocked}
+        stack = list(seen)
+        while stack:
+            for x in nb[stack.pop()]:
+                if x not in seen and x not in blocked:
+                    seen.add(x)
+                    stack.append(x)
+        return seen
+
+    targets = {int(t) for t in targets}
+    held: set[int] = set()
+    reach = reached(held) & targets
+    ok: set[int] = set()
+    for f in probers:
+        hold = {int(f)} | nb.get(int(f), set())
+        if reach - hold - reached(held | hold):
+            continue
+        ok.add(int(f))
+        held |= hold
+        reach -= hold
+    return ok
+
+
 def more_free_probes(snap: Snapshot, params: TopologyParams, *, movers: set[int],
                      skip: set[int], test_drive_failures: dict[int, list[float]],
                      new_vertex: int, max_n: int, evidence: dict | None = None,

@@ -19,7 +19,7 @@ from .config import CoordinatorConfig, PushMode
 from .jobs import (FINISHED, OVER, PushJob, Step, StepName, StepState, drive_failures,
                    evidence_kwargs, make_job)
 from .placement import Placement
-from .planner import JobSpec, Snapshot, more_free_probes, replan_push
+from .planner import JobSpec, Snapshot, carryable, more_free_probes, replan_push
 from .roster import Roster
 from .tasks import TaskBuilder, td_length
 from .topology.evidence import Evidence
@@ -104,20 +104,28 @@ class Pushes:
     def finished(self) -> bool:
         return all(j.finished for j in self.jobs)
 
-    def carried(self) -> list[PushJob]:
-        """The free probes that may go on into the next cycle (``free_probes_carry``): all
-        unfinished ones once every push of the cycle is over, else none. A cycle of free
-        probes alone waits for them (its next plan would find the same probes out)."""
+    def carried(self, plan=None) -> list[PushJob] | None:
+        """The free probes that go on into the next cycle (``free_probes_carry``) once every
+        push of the cycle is over: the unfinished ones, when each may stay out
+        (:func:`coordinator.planner.carryable` on ``plan``, the cycle's CyclePlan; without
+        one, each may). None: the cycle still waits (a push runs, a probe may not stay
+        out, or the cycle has free probes alone, whose next plan would find them out)."""
         if not (self.cfg.free_probes and self.cfg.free_probes_carry):
-            return []
+            return None
         pushes = [j for j in self.jobs if not j.spec.free]
         if not pushes or not all(j.finished for j in pushes):
-            return []
-        return [j for j in self.jobs if not j.finished]
+            return None
+        out = [j for j in self.jobs if not j.finished]
+        if out and plan is not None and self.snapshot is not None:
+            ok = carryable(plan.edges, self.snapshot.sources, plan.open_vertices,
+                           [j.spec.path[-1] for j in out])
+            if any(j.spec.path[-1] not in ok for j in out):
+                return None
+        return out
 
-    def out_robots(self, jobs: list[PushJob]) -> set[int]:
+    def out_robots(self, jobs: list[PushJob] | None) -> set[int]:
         """The robots of ``jobs`` (free probes) with a step still to do."""
-        return {s.robot for j in jobs for s in j.to_do() if s.robot >= 0}
+        return {s.robot for j in jobs or () for s in j.to_do() if s.robot >= 0}
 
     # ------------------------------------------------------------------ advance
     def _moving(self) -> set[int]:

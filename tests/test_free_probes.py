@@ -21,7 +21,7 @@ from swarmcover.coordinator.jobs import StepState, make_job
 from swarmcover.coordinator.roster import Robot
 from swarmcover.coordinator.topology.evidence import Evidence, probe_key
 from swarmcover.coordinator.topology.params import TopologyParams
-from swarmcover.coordinator.planner import Snapshot, plan_cycle, replan_push
+from swarmcover.coordinator.planner import Snapshot, carryable, plan_cycle, replan_push
 
 DEG = math.pi / 180
 # the probe rule's free probes (interior probe lines; [coordinator] sweep = false);
@@ -347,4 +347,45 @@ def test_a_free_probe_still_out_goes_on_into_the_next_cycle_which_plans_around_i
     dep.jobs = [push, free]
     for s in free.steps:
         s.state = StepState.RUNNING if s.name == "test_drive" else StepState.PENDING
-    assert dep.pushes.carried() == []
+    assert dep.pushes.carried() is None
+
+
+def test_a_probe_that_would_cut_the_pushes_off_their_frontier_is_waited_for_not_carried():
+    """A corridor two robots wide (rows along walls, source 0 at one end): a prober in its
+    middle and its neighbours cross it, so carried it would hold every push of the next
+    cycle out of the corridor beyond. It is waited for; one near the far end, beyond which
+    nothing is open, may stay out, and so may a prober at the end of a room's wall."""
+    P, touch = [], {}
+    for i in range(7):
+        P.append((0.9 * i, 0.0))
+        touch[len(P) - 1] = -90 * DEG
+        P.append((0.9 * i + 0.45, 0.78))
+        touch[len(P) - 1] = 90 * DEG
+    P = np.array(P)
+    snap = Snapshot(occupant={v: 100 + v for v in range(len(P))},
+                    nbrs={v: _nbrs(P, v) for v in range(len(P))}, contact=touch,
+                    sources=[0], source_dirs=[0.0])
+    plan = _plan(snap, free_probes=True, max_paths=8)
+    free = [j.path[0] for j in plan.jobs if j.free]
+    assert 6 in free                               # a probe mid-corridor, at the start
+    far = max(plan.open_vertices)                  # the corridor's open end
+    ok = carryable(plan.edges, [0], plan.open_vertices, free)
+    mid = [f for f in free if f + 3 < far]
+    assert mid and not ok & set(mid)
+    # the rule itself: what it keeps out never cuts a reachable deployment off
+    assert carryable(plan.edges, [0], {far}, [far - 1]) == {far - 1}
+    assert carryable(plan.edges, [0], {far}, [6]) == set()
+    # at the deployer: once the push is over, the cycle waits for the probe mid-corridor
+    dep, _ = _deployer(snap)
+    dep.jobs = [make_job(j, snap.occupant) for j in plan.jobs
+                if not j.free or j.path == [6]]
+    dep.plan = plan
+    for j in dep.jobs:
+        if not j.spec.free:
+            j.cancel("over")
+    assert dep.pushes.carried(plan) is None
+    # a room: the DOOR scene's prober at the wall end may stay out
+    room = _snap()
+    rplan = _plan(room, free_probes=True)
+    (rf,) = [j.path[0] for j in rplan.jobs if j.free]
+    assert carryable(rplan.edges, room.sources, rplan.open_vertices, [rf]) == {rf}
