@@ -113,7 +113,9 @@ class CoordinatorConfig:
                                    # (no path through a prober's vertex or its neighbours, no
                                    # free probe next to it; the snapshot keeps the prober's
                                    # edges as they were when it left) and never certifies
-                                   # while one is out. false: the cycle waits for them
+                                   # while one is out; a probe whose vertex and neighbours
+                                   # would cut the next pushes off a deployment is waited
+                                   # for (planner.carryable). false: the cycle waits for all
     sweeps_last: bool = True       # pushes go to deployments that may leave a robot while the
                                    # fence offers any; wall sweeps (which mostly come home) run
                                    # beside them as free probes, and by pushes once only sweeps
