@@ -49,6 +49,7 @@ class Pushes:
         self._snapshot: Snapshot | None = None
         self.tasks: TaskBuilder | None = None
         self._rolled: tuple[int, int] = (-1, -1)   # (cycle, jobs over) last rolled at
+        self._carry_at: tuple = (None, False)      # (cycle, probes out), may all stay out
 
     @property
     def snapshot(self) -> Snapshot | None:
@@ -117,9 +118,13 @@ class Pushes:
             return None
         out = [j for j in self.jobs if not j.finished]
         if out and plan is not None and self.snapshot is not None:
-            ok = carryable(plan.edges, self.snapshot.sources, plan.open_vertices,
-                           [j.spec.path[-1] for j in out])
-            if any(j.spec.path[-1] not in ok for j in out):
+            # asked every step while the cycle waits: the search runs once per set out
+            key = (self.cycle, tuple(id(j) for j in out))
+            if self._carry_at[0] != key:
+                ok = carryable(plan.edges, self.snapshot.sources, plan.open_vertices,
+                               [j.spec.path[-1] for j in out])
+                self._carry_at = (key, all(j.spec.path[-1] in ok for j in out))
+            if not self._carry_at[1]:
                 return None
         return out
 

@@ -96,5 +96,10 @@ def bearing_spread(angles: Iterable[float]) -> float:
     over pairs of sin^2 of their difference. 0 when all lie on one line (one bearing, or
     opposite ones: a step along that line changes none of them); 0.25 for two bearings
     30 deg apart; 0.75 for two 60 deg apart; 2.25 for three 120 deg apart."""
-    a = list(angles)
-    return sum(math.sin(x - y) ** 2 for i, x in enumerate(a) for y in a[:i])
+    sxx = syy = sxy = 0.0
+    for a in angles:             # O(n): robots evaluate it every tick while homing
+        s, c = math.sin(a), math.cos(a)
+        sxx += s * s
+        syy += c * c
+        sxy += s * c
+    return max(0.0, sxx * syy - sxy * sxy)

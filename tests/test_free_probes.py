@@ -344,10 +344,13 @@ def test_a_free_probe_still_out_goes_on_into_the_next_cycle_which_plans_around_i
     # off: the cycle waits for its free probes
     dep = Deployer(CoordinatorConfig(sweep=False, free_probes_carry=False),
                    sources=[90 * DEG])
-    dep.jobs = [push, free]
+    dep.jobs = [push, free]                       # the push is over, the probe out
     for s in free.steps:
         s.state = StepState.RUNNING if s.name == "test_drive" else StepState.PENDING
+    assert push.finished and not free.finished
     assert dep.pushes.carried() is None
+    dep.pushes.cfg = replace(dep.cfg, free_probes_carry=True)
+    assert dep.pushes.carried() == [free]
 
 
 def test_a_probe_that_would_cut_the_pushes_off_their_frontier_is_waited_for_not_carried():

@@ -187,11 +187,11 @@ def test_scalar_polygon_forms_agree_with_the_world_s_array_forms(rays, points):
 @settings(max_examples=80, deadline=None)
 @given(st.lists(st.floats(-PI, PI, allow_nan=False), max_size=7))
 def test_bearing_spread_is_the_determinant_of_the_bearing_normals_gram_matrix(angles):
-    """sum over pairs of sin^2 of the difference = det(sum n n^T), n the unit normals:
-    zero with fewer than two bearings, and for bearings on one line (opposite too)."""
-    N = np.array([[-math.sin(a), math.cos(a)] for a in angles]).reshape(-1, 2)
-    M = N.T @ N
-    assert bearing_spread(angles) == pytest.approx(M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0], abs=1e-9)
+    """det(sum n n^T), n the unit normals (what bearing_spread computes, in O(n)) = the sum
+    over pairs of sin^2 of the difference (the oracle here): zero with fewer than two
+    bearings, and for bearings on one line (opposite too)."""
+    pairs = sum(math.sin(x - y) ** 2 for i, x in enumerate(angles) for y in angles[:i])
+    assert bearing_spread(angles) == pytest.approx(pairs, abs=1e-9)
     if angles:
         a = angles[0]
         assert bearing_spread([a, a + PI, a, wrap(a - PI)]) == pytest.approx(0.0, abs=1e-12)
