@@ -308,7 +308,8 @@ class Deployer:
             lattice_spacing=self.cfg.d0 if self.cfg.lattice else None,
             evidence=evidence_kwargs(self.evidence, snap), free_probes=self.cfg.free_probes,
             returned_probes=self.evidence.returned_probes(snap.occupant),
-            sweeps_last=self.cfg.sweeps_last, out=frozenset(out))
+            sweeps_last=self.cfg.sweeps_last, out=frozenset(out),
+            sweeps_free=self.cfg.sweeps_free, free_max=self.cfg.free_max)
         self.next_vertex += len(plan.jobs)
         self.redundant = set(plan.redundant)
         if carried:

@@ -131,7 +131,8 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
                next_vertex: int, lattice_spacing: float | None = None,
                evidence: dict | None = None, free_probes: bool = False,
                returned_probes: frozenset = frozenset(), sweeps_last: bool = False,
-               out: frozenset = frozenset()) -> CyclePlan:
+               out: frozenset = frozenset(), sweeps_free: bool = False,
+               free_max: int | None = None) -> CyclePlan:
     """Decide one cycle. ``next_vertex``: the first unused vertex id (for new positions).
 
     lattice_spacing: when set (rv units) and every robot is holonomic, each new position
@@ -148,7 +149,10 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     already drove clear and came back from: never offered as a free probe again (their side
     stays open; a push along a path may still take them, and its robot stays there).
     sweeps_last: no push goes to a wall sweep while the fence offers anything else
-    (:func:`_placing_first`); free probes still sweep.
+    (:func:`_placing_first`); free probes still sweep. sweeps_free (with free_probes): once
+    the push fence offers nothing but sweeps, free probes are chosen first (off the sources
+    and ``out`` only) and pushes avoid them and their neighbours. free_max: free probes
+    per cycle at most (None: max_paths).
     certified is False whenever the fence has no one-sided edge (an empty target cycle
     proves nothing).
     previous_redundant: redundant vertices found earlier (used as path starts until the
@@ -189,6 +193,18 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     push_fence = _placing_first(fence) if sweeps_last else fence
     hold = {int(v) for v in out if v in cx}
     hold.update(int(x) for v in list(hold) for x in cx.neighbours(v))
+    first: list[JobSpec] = []
+    n_free = max_paths if free_max is None else int(free_max)
+    if free_probes and sweeps_free and _only_sweeps(push_fence):
+        # nothing but wall sweeps left: free probes take every one they can, many at once;
+        # pushes (whose paths would keep the probes off their neighbourhoods) only the rest
+        first = _free_probe_specs(snap, params, cx, fence,
+                                  set(int(s) for s in snap.sources) | {int(v) for v in out},
+                                  next_vertex, n_free, returned_probes)
+        for spec in first:
+            f = int(spec.path[-1])
+            hold.add(f)
+            hold.update(int(x) for x in cx.neighbours(f))
     paths = plan_pushes(cx, push_fence, snap.sources, sorted(plan.redundant), params=params,
                         max_paths=max_paths, exclude=hold)
     chosen = list(paths)
@@ -205,10 +221,11 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
             break
         chosen.append(extra)
 
-    vid = next_vertex
+    vid = next_vertex + len(first)
     for pth in chosen:
         plan.jobs.append(_job_spec(snap, params, pth, vid, test_drive, scale_correct))
         vid += 1
+    plan.jobs.extend(first)
     # free probes: a frontier robot away from every push probes its side in the same cycle,
     # without a path; clear or not, it ends back at its vertex (the deployer homes it). A
     # probe homes on its vertex's neighbours (its landmarks), which must hold still, and
@@ -217,8 +234,8 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     # neighbours off every mover. With symmetric neighbourhoods both say: f is neither a
     # mover nor next to one. Landmarks may be shared.
     if free_probes:
-        _add_free_probes(snap, params, cx, fence, plan, vid, max_paths, returned_probes,
-                         out=out)
+        _add_free_probes(snap, params, cx, fence, plan, vid, n_free - len(first),
+                         returned_probes, out=out)
     if lattice_spacing and plan.jobs:
         _place_on_lattice(snap, plan.jobs, float(lattice_spacing), params, test_drive_failures)
     return plan
@@ -238,6 +255,12 @@ def _placing_first(fence):
     from dataclasses import replace
     deps = _keeping(fence, lambda d: not d.sweep_far > 0)
     return replace(fence, deployments=deps) if deps else fence
+
+
+def _only_sweeps(fence) -> bool:
+    """Whether every deployment ``fence`` offers is a wall sweep (and it offers one)."""
+    deps = [d for lst in fence.deployments.values() for d in lst]
+    return bool(deps) and all(d.sweep_far > 0 for d in deps)
 
 
 def _without_probes(fence, skip):

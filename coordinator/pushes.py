@@ -453,7 +453,7 @@ class Pushes:
         if over == 0 or all(j.finished or j.spec.free for j in self.jobs):
             return
         out = [j for j in self.jobs if j.spec.free and not j.finished]
-        room = self.cfg.max_paths - len(out)
+        room = self.cfg.free_max - len(out)
         if room <= 0:
             return
         pl = self.placement
@@ -542,6 +542,11 @@ class Pushes:
                          else frozenset()),
             sweeps_last=self.cfg.sweeps_last and not job.spec.free)
         if spec is None or (job.spec.free and spec.kind != "probe"):
+            return False
+        if (not job.spec.free and spec.sweep_far > 0 and spec.path[-1] != job.spec.path[-1]
+                and self.cfg.free_probes and self.cfg.sweeps_free):
+            # a sweep at another vertex would run alone while the path waits: free probes
+            # take it beside others (this cycle's, rolling, or the next's)
             return False
         spec.free = job.spec.free
         pl.next_vertex += 1

@@ -396,3 +396,117 @@ def test_with_sweeps_last_pushes_go_where_a_robot_may_stay_and_sweeps_run_free()
     snap = dataclasses.replace(_snap(), sources=[5])
     jobs = plan_cycle(snap, TopologyParams(d_td=0.9), sweeps_last=True, **kw).jobs
     assert [j.sweep_far > 0 for j in jobs] == [False, True] and jobs[1].free
+
+
+# three rows of robots between two walls (top row touching above, bottom row below), their
+# ends closed by failed test drives: the fence offers nothing but wall sweeps. The source is
+# vertex 8, in the middle row.
+_H = 0.9 * math.sqrt(3) / 2
+STRIP = np.array([(0.9 * i, 0.0) for i in range(6)] + [(0.45 + 0.9 * i, -_H) for i in range(5)]
+                 + [(0.9 * i, -2 * _H) for i in range(6)])
+STRIP_SOURCE = 8
+
+
+def _strip():
+    """(snapshot, test-drive failures that close every side but the walls' sweeps)."""
+    touch = {v: (90 if v < 6 else -90) * DEG for v in range(len(STRIP)) if v < 6 or v > 10}
+    snap = Snapshot(occupant={v: 100 + v for v in range(len(STRIP))},
+                    nbrs={v: _nbrs(STRIP, v) for v in range(len(STRIP))}, contact=touch,
+                    sources=[STRIP_SOURCE], source_dirs=[90 * DEG])
+    from swarmcover.coordinator.planner import _complex_and_fence
+    fails: dict[int, list[float]] = {}
+    for _ in range(4):
+        _, fence = _complex_and_fence(snap, TopologyParams(d_td=0.9), fails, None)
+        for v, lst in fence.deployments.items():
+            fails.setdefault(v, []).extend(d.bearing for d in lst if d.sweep_far <= 0)
+    _, fence = _complex_and_fence(snap, TopologyParams(d_td=0.9), fails, None)
+    assert fence.deployments and all(d.sweep_far > 0 for lst in fence.deployments.values()
+                                     for d in lst)
+    return snap, fails
+
+
+def _strip_plan(sweeps_free):
+    snap, fails = _strip()
+    return snap, plan_cycle(snap, TopologyParams(d_td=0.9), cycle=1, redundancy=False,
+                            test_drive_failures=fails, previous_redundant=set(),
+                            protected=set(), max_paths=4, scale_correct=False,
+                            test_drive=True, next_vertex=20, free_probes=True,
+                            sweeps_last=True, sweeps_free=sweeps_free)
+
+
+def test_once_only_sweeps_are_left_free_probes_take_them_first_and_pushes_the_rest():
+    """[coordinator] sweeps_free: a push to a wall sweep holds its path still and keeps
+    free probes off the path's neighbourhood while its end sweeps (and mostly comes home);
+    free probes chosen first sweep more walls at once, and pushes take only the sweeps next
+    to the source, where no free probe may go."""
+    snap, plan = _strip_plan(True)
+    near_source = {STRIP_SOURCE} | set(snap.nbrs[STRIP_SOURCE])
+    push = [j for j in plan.jobs if not j.free]
+    free = [j for j in plan.jobs if j.free]
+    assert all(j.sweep_far > 0 for j in plan.jobs)
+    assert push and all(j.path[-1] in near_source and len(j.path) <= 2 for j in push)
+    movers = {v for j in push for v in j.path}
+    probers = [j.path[0] for j in free]
+    for f in probers:                      # off every mover, its landmarks too
+        assert not ({f} | set(snap.nbrs[f])) & (movers | set(probers) - {f})
+    # pushes first: a path through the middle row to a far wall robot keeps its
+    # neighbourhood from probing; fewer sweeps at once, more robots held
+    _, old = _strip_plan(False)
+    assert any(len(j.path) > 2 for j in old.jobs if not j.free)
+    assert len(probers) > len([j for j in old.jobs if j.free])
+    assert len(plan.jobs) >= len(old.jobs)
+    assert len(movers) < len({v for j in old.jobs if not j.free for v in j.path})
+
+
+@pytest.mark.parametrize("sweeps_free", [True, False])
+def test_a_push_whose_sweep_touched_is_not_replanned_to_a_sweep_elsewhere(sweeps_free):
+    """With sweeps_free a push whose sweeps at its end touched is over (its path stops
+    waiting): the sweeps at other vertices go to free probes. Without it, the push sweeps
+    on at the next vertex. At its own end it sweeps on either way (the robot is there)."""
+    snap, fails = _strip()
+    _, plan = _strip_plan(True)
+    spec = next(j for j in plan.jobs if not j.free)
+    f = spec.path[-1]
+    dep, seq = free_probe_deployer(snap, CoordinatorConfig(sweeps_free=sweeps_free))
+    for v, dirs in fails.items():
+        for d in dirs:
+            dep.evidence.add_failed_direction(v, d)
+    job = make_job(spec, snap.occupant)
+    dep.jobs = [job]
+    t = 1.0
+    while not job.aborted and job.spec.path[-1] == f and job.retries < 4:
+        dep.out.actions = []
+        dep.pushes.advance(job, t)
+        td = next(a.task for a in dep.out.actions if isinstance(a, SendTask)
+                  and a.task.kind == "test_drive")
+        t += 8.0
+        dep.on_status(Status(robot=td.robot, seq=next(seq), t=t, state="holding", vertex=f,
+                             task_id=td.task_id, task_state="failed",
+                             reason=sweep_reason(0.55, -INF)))
+        dep.pushes.advance(job, t)
+    if sweeps_free:
+        assert job.aborted and job.spec.path[-1] == f
+    else:
+        assert not job.aborted and job.spec.sweep_far > 0 and job.spec.path[-1] != f
+
+
+def test_free_probes_are_capped_by_free_probes_max_not_by_the_pushes_cap():
+    """[coordinator] free_probes_max = 0 (the default): no cap on free probes but the rule
+    that keeps each off every mover and its neighbours; a positive value caps them. The
+    planner alone (no free_max) keeps the pushes' cap, max_paths."""
+    snap, fails = _strip()
+    kw = dict(cycle=1, redundancy=False, test_drive_failures=fails, previous_redundant=set(),
+              protected=set(), max_paths=1, scale_correct=False, test_drive=True,
+              next_vertex=20, free_probes=True, sweeps_last=True, sweeps_free=True)
+    prm = TopologyParams(d_td=0.9)
+
+    def free(**more):
+        return [j.path[0] for j in plan_cycle(snap, prm, **kw, **more).jobs if j.free]
+    assert len(free()) == 1
+    cfg = CoordinatorConfig()
+    assert cfg.free_probes_max == 0 and cfg.free_max > 100
+    many = free(free_max=cfg.free_max)
+    assert len(many) >= 4
+    assert len(free(free_max=CoordinatorConfig(free_probes_max=2).free_max)) == 2
+    for f in many:
+        assert not set(snap.nbrs[f]) & set(many)
