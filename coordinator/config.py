@@ -132,7 +132,7 @@ class CoordinatorConfig:
                                    # a push whose test drive touched is not re-planned to a
                                    # sweep at another vertex. false: pushes take sweeps, and
                                    # re-plan to one sweep after another (up to 12) while
-                                   # their paths wait (tiny seed 0: 8 sweeps in a row, 84 s).
+                                   # their paths wait (tiny seed 0: 9 sweeps in a row, 62 s).
                                    # In-process, with free_probes_max 0: every config seeds
                                    # 0-2, 34,065 -> 32,950 s simulated (-3.3%), 2,175 -> 2,190
                                    # robots; tiny -12.5%, small +3.4%
