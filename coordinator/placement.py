@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from swarmcover.ground.angles import wrap
 
-from .planner import Snapshot
+from .planner import Snapshot, reachable
 from .roster import Roster
 
 SETTLED_STATES = ("holding", "idle")
@@ -125,12 +125,6 @@ def stray_vertices(snap: Snapshot, n_sources: int) -> set[int]:
     present = [k for k in range(n_sources) if k in snap.occupant]
     if not present:
         return set()
-    seen = set(present)
-    stack = list(present)
-    while stack:
-        v = stack.pop()
-        for u in snap.nbrs.get(v, {}):
-            if u not in seen and v in snap.nbrs.get(u, {}):
-                seen.add(u)
-                stack.append(u)
+    nbrs = snap.nbrs
+    seen = reachable(present, lambda v: (u for u in nbrs.get(v, {}) if v in nbrs.get(u, {})))
     return set(snap.occupant) - seen

@@ -259,8 +259,7 @@ def _placing_first(fence):
 
 def _only_sweeps(fence) -> bool:
     """Whether every deployment ``fence`` offers is a wall sweep (and it offers one)."""
-    deps = [d for lst in fence.deployments.values() for d in lst]
-    return bool(deps) and all(d.sweep_far > 0 for d in deps)
+    return any(fence.deployments.values()) and not _keeping(fence, lambda d: not d.sweep_far > 0)
 
 
 def _without_probes(fence, skip):
@@ -322,6 +321,19 @@ def _free_probe_specs(snap: Snapshot, params: TopologyParams, cx, fence, movers:
     return out
 
 
+def reachable(starts, neighbours, blocked=frozenset()) -> set[int]:
+    """The vertices a walk from ``starts`` reaches through ``neighbours(v)`` (an iterable of
+    vertices), never entering ``blocked`` (a start in it is not reached)."""
+    seen = {v for v in starts if v not in blocked}
+    stack = list(seen)
+    while stack:
+        for x in neighbours(stack.pop()):
+            if x not in seen and x not in blocked:
+                seen.add(x)
+                stack.append(x)
+    return seen
+
+
 def carryable(edges, sources, targets, probers) -> set[int]:
     """Which probers (vertices whose robots are out on free probes) may stay out into the
     next cycle (``[coordinator] free_probes_carry``), in order, greedily: while one is
@@ -337,16 +349,10 @@ def carryable(edges, sources, targets, probers) -> set[int]:
     for a, b in edges:
         nb.setdefault(int(a), set()).add(int(b))
         nb.setdefault(int(b), set()).add(int(a))
+    starts = [int(s) for s in sources if int(s) in nb]
 
     def reached(blocked: set[int]) -> set[int]:
-        seen = {int(s) for s in sources if int(s) in nb and int(s) not in blocked}
-        stack = list(seen)
-        while stack:
-            for x in nb[stack.pop()]:
-                if x not in seen and x not in blocked:
-                    seen.add(x)
-                    stack.append(x)
-        return seen
+        return reachable(starts, lambda v: nb[v], blocked)
 
     targets = {int(t) for t in targets}
     held: set[int] = set()
@@ -391,7 +397,7 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
                 new_vertex: int, scale_correct: bool, test_drive: bool,
                 lattice_spacing: float | None = None,
                 evidence: dict | None = None, skip_probes=frozenset(),
-                sweeps_last: bool = False) -> JobSpec | None:
+                sweeps_last: bool = False, sweeps_at=None) -> JobSpec | None:
     """The next-best push from ``start`` within this cycle, after a test drive touched
     (spec 3.4(iv): "choose the next-best frontier"), or None.
 
@@ -402,7 +408,9 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
     frontier vertices, are not used (their occupants are moving or about to), and a lattice
     position keeps clear of their targets. exclude: further vertices no path may use.
     skip_probes: probe keys not to offer (a free probe's retry: those it drove clear).
-    sweeps_last: as plan_cycle's.
+    sweeps_last: as plan_cycle's. sweeps_at: wall sweeps are offered only at these vertices
+    (None: at any; ``[coordinator] sweeps_free``: a push sweeps on at its own end only,
+    and the other sweeps go to free probes, many at once, while its path would wait).
     """
     from .topology.paths import plan_pushes
 
@@ -412,6 +420,11 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
     fence = _without_probes(fence, skip_probes)
     if sweeps_last:
         fence = _placing_first(fence)
+    if sweeps_at is not None:
+        from dataclasses import replace
+        deps = {f: tuple(d for d in lst if f in sweeps_at or not d.sweep_far > 0)
+                for f, lst in fence.deployments.items()}
+        fence = replace(fence, deployments={f: lst for f, lst in deps.items() if lst})
     used = set(exclude) | _claimed(cx, [job.path for job in busy])
     used.discard(start)
     found = plan_pushes(cx, fence, [start], (), params=params, max_paths=1, exclude=used)

@@ -540,13 +540,10 @@ class Pushes:
             evidence=evidence_kwargs(self.evidence, snap),
             skip_probes=(self.evidence.returned_probes(snap.occupant) if job.spec.free
                          else frozenset()),
-            sweeps_last=self.cfg.sweeps_last and not job.spec.free)
+            sweeps_last=self.cfg.sweeps_last and not job.spec.free,
+            sweeps_at=({job.spec.path[-1]} if not job.spec.free and self.cfg.free_probes
+                       and self.cfg.sweeps_free else None))
         if spec is None or (job.spec.free and spec.kind != "probe"):
-            return False
-        if (not job.spec.free and spec.sweep_far > 0 and spec.path[-1] != job.spec.path[-1]
-                and self.cfg.free_probes and self.cfg.sweeps_free):
-            # a sweep at another vertex would run alone while the path waits: free probes
-            # take it beside others (this cycle's, rolling, or the next's)
             return False
         spec.free = job.spec.free
         pl.next_vertex += 1
