@@ -397,7 +397,7 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
                 new_vertex: int, scale_correct: bool, test_drive: bool,
                 lattice_spacing: float | None = None,
                 evidence: dict | None = None, skip_probes=frozenset(),
-                sweeps_last: bool = False, sweeps_at=None) -> JobSpec | None:
+                sweeps_last: bool = False) -> JobSpec | None:
     """The next-best push from ``start`` within this cycle, after a test drive touched
     (spec 3.4(iv): "choose the next-best frontier"), or None.
 
@@ -408,9 +408,7 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
     frontier vertices, are not used (their occupants are moving or about to), and a lattice
     position keeps clear of their targets. exclude: further vertices no path may use.
     skip_probes: probe keys not to offer (a free probe's retry: those it drove clear).
-    sweeps_last: as plan_cycle's. sweeps_at: wall sweeps are offered only at these vertices
-    (None: at any; ``[coordinator] sweeps_free``: a push sweeps on at its own end only,
-    and the other sweeps go to free probes, many at once, while its path would wait).
+    sweeps_last: as plan_cycle's.
     """
     from .topology.paths import plan_pushes
 
@@ -420,11 +418,6 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
     fence = _without_probes(fence, skip_probes)
     if sweeps_last:
         fence = _placing_first(fence)
-    if sweeps_at is not None:
-        from dataclasses import replace
-        deps = {f: tuple(d for d in lst if f in sweeps_at or not d.sweep_far > 0)
-                for f, lst in fence.deployments.items()}
-        fence = replace(fence, deployments={f: lst for f, lst in deps.items() if lst})
     used = set(exclude) | _claimed(cx, [job.path for job in busy])
     used.discard(start)
     found = plan_pushes(cx, fence, [start], (), params=params, max_paths=1, exclude=used)
