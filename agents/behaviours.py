@@ -90,7 +90,7 @@ class Behaviour:
         self.changed = True
         self.rejected = 0            # tasks refused (wrong robot id)
         self.t0 = 0.0                # start time of the current task (s)
-        self.see = Perception(robot, params.dt)
+        self.see = Perception(robot, params.dt, params.tau)
         self.ctx = Context(params, self.see)
         self.touch = Contact()       # sticky obstacle contact (spec 3.5)
         self.cmd = STOP              # the command published for the last Sense

@@ -1,7 +1,8 @@
 """What a robot perceives, kept between ticks. Pure: no I/O and no clock but ``Sense.t``.
 
 * :class:`Perception`: the current Sense tick digested (neighbours' bearings and back
-  bearings, obstacle touch sectors, when each neighbour was last seen, when another robot
+  bearings, touch sectors read three ways (walls; maybe a robot, where one is seen; a
+  robot that says it touches us), when each neighbour was last seen, when another robot
   last touched us) plus the dead reckoning of the robot's own commands (integrated turn
   ``heading`` and ``advance`` along the commanded direction).
 * :class:`Contact`: the sticky obstacle contact reported in Status (spec 3.5).
@@ -18,19 +19,22 @@ from .control import FrameTracker, circmean, unit, wrap
 class Perception:
     """One robot's view of the world, refreshed by :meth:`update` once per Sense tick."""
 
-    __slots__ = ("robot", "n", "t", "tick", "dt", "seen", "back", "obst", "bump", "last_seen",
-                 "last_seen_t", "bumped_t", "heading", "advance")
+    __slots__ = ("robot", "half", "n", "t", "tick", "dt", "seen", "back", "obst", "bump", "told",
+                 "last_seen", "last_seen_t", "bumped_t", "heading", "advance")
 
-    def __init__(self, robot: int, dt: float):
+    def __init__(self, robot: int, dt: float, half: float):
         self.robot = robot
+        self.half = half             # a touch sector's half-width (rad): pi / n_touch
         self.n = 0                   # Sense ticks handled
         self.t: float | None = None  # Sense.t of the current tick (s)
         self.tick = -1               # Sense.tick of the current tick
         self.dt = dt                 # last measured tick length (s), the nominal dt at first
         self.seen: dict[int, float] = {}   # neighbour id -> bearing (rad, body frame)
         self.back: dict[int, float] = {}   # neighbour id -> its bearing of us (rad, its frame)
-        self.obst: list[float] = []        # obstacle (not robot) touch sectors (rad, body)
-        self.bump: list[float] = []        # touch sectors another robot is in (rad, body)
+        # touch sectors (centre bearings, rad, body frame), three ways:
+        self.obst: list[float] = []        # no robot seen in their span: obstacles
+        self.bump: list[float] = []        # a robot seen in their span, or told: maybe a robot
+        self.told: list[float] = []        # another robot says it touches us there
         self.last_seen: dict[int, int] = {}      # neighbour id -> tick index last seen
         self.last_seen_t: dict[int, float] = {}  # neighbour id -> Sense.t last seen (s)
         self.bumped_t = -1e18        # last time another robot touched us (s)
@@ -73,8 +77,12 @@ class Perception:
         for i in seen:
             self.last_seen[i] = n
             self.last_seen_t[i] = t
-        self.obst = [a for a, r in zip(s.touch, s.touch_robot) if not r]
-        self.bump = [a for a, r in zip(s.touch, s.touch_robot) if r]
+        self.told = [a for a, r in zip(s.touch, s.touch_robot) if r]
+        h = self.half
+        bump = [a for a, r in zip(s.touch, s.touch_robot)
+                if r or any(abs(wrap(b - a)) <= h for b in seen.values())]
+        self.obst = [a for a in s.touch if a not in bump] if bump else list(s.touch)
+        self.bump = bump
         if self.bump:
             self.bumped_t = s.t
         return dt

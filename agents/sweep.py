@@ -51,7 +51,11 @@ robot that sees nobody is cut off from every source, and the coordinator sends i
 Phase 1 goes towards the edge's other end until it crosses the edge's perpendicular at
 ``sweep_far``; phase 2 back past the vertex until it crosses the ray ``sweep_stop`` beyond
 the perpendicular there. A phase stops short after sweep_budget_rv of travel, or when a
-robot's touch sector blocks the way; the edge's other end blocking phase 1 counts as reaching ``sweep_far`` (no third body fits between them).
+robot's touch sector blocks the way (a robot seen in its span: a wall there may be one).
+The edge's other end blocking phase 1 counts as reaching ``sweep_far`` (no third body fits
+between them) only when it says it touches there (``Perception.told``): a wall touched in
+the sector the other end is seen in, 0.4 m short of it, once counted, and closed the fence
+side over a door behind it (tests/test_agent_sweep.py).
 """
 from __future__ import annotations
 
@@ -323,9 +327,11 @@ class Sweep(ModeState):
         if self.travelled >= p.sweep_budget_rv * p.rv or bumps:
             if self.phase == 2:
                 return self._end()
-            if bumps and g.other in see.seen and any(
-                    abs(wrap(c - see.seen[g.other])) <= p.tau for c in bumps):
-                self.hi = max(self.hi, g.far)   # the other end's body: the wall goes on there
+            if g.other in see.seen and any(
+                    abs(wrap(c - see.seen[g.other])) <= p.tau
+                    for c in see.told if blocks(body, c, p.tau)):
+                # the other end's body, by its own word: the wall goes on there
+                self.hi = max(self.hi, g.far)
             self._phase_two()
             return Tick()
         if self.turned >= OPEN_TURN - 1e-9:

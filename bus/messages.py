@@ -460,8 +460,9 @@ class Sense(Message):
     back_bearings: for each visible robot l, the bearing at which l sees this robot, in l's
       body frame (rad) -- emulates neighbours telling each other (spec 1.5); used for frame
       alignment (spec 4.7).
-    touch: body-frame centre bearings (rad) of active contact sectors; touch_robot: whether a
-      robot is visible in that sector's direction (then the contact is not an obstacle).
+    touch: body-frame centre bearings (rad) of active contact sectors; touch_robot: whether
+      another robot touches there (it feels the contact too and tells this one, as with
+      back_bearings; then the contact is not an obstacle, whatever wall it also touches).
     """
     robot: int = f_int(0)
     tick: int = f_int(0)

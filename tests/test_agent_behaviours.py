@@ -439,3 +439,20 @@ def test_a_goto_held_off_its_target_within_the_bearing_tolerance_arrives_not_sta
     assert run(beh, sim, ME, 3000, until=lambda: beh.task_state != "running")
     assert beh.task_state == "done", beh.reason
     assert abs(sim.pose[ME][0] + 0.025) < 0.01, sim.pose[ME]
+
+
+def test_touch_sectors_read_as_walls_robots_seen_and_robots_that_say_so():
+    """Perception sorts the touch sectors (8 of them, +-22.5 deg): ``told`` where another
+    robot says it touches us (Sense.touch_robot), ``bump`` where a robot is seen within the
+    sector's span or told (maybe a robot: not slid along), ``obst`` the rest."""
+    from swarmcover.agents.behaviours import STOP
+    from swarmcover.agents.perception import Perception
+    from swarmcover.bus.messages import Sense
+    see = Perception(ME, 0.05, PI / 8)
+    see.update(Sense(robot=ME, tick=0, t=0.0, ids=[1, 2], bearings=[0.3, 2.0],
+                     back_bearings=[0.0, 0.0], touch=[0.0, PI / 2, -PI / 2, PI],
+                     touch_robot=[False, True, False, False]).validate(), STOP, None)
+    assert see.told == [PI / 2]
+    assert see.bump == [0.0, PI / 2]               # robot 1 seen at 17 deg, in sector 0
+    assert see.obst == [-PI / 2, PI]
+    assert see.bumped_t == 0.0

@@ -277,6 +277,44 @@ def test_a_robot_in_the_way_stops_the_sweep_short():
     assert _local(trace, rot)[:, 0].max() < 0.45 - 2 * R + 0.01
 
 
+@pytest.mark.parametrize("ang", [0.0, 22.5, 40.0])
+@pytest.mark.parametrize("y1", [R + 0.002, 0.1])
+def test_the_other_end_s_body_in_the_way_counts_as_the_far_line(y1, ang):
+    """Robot 1, the edge's other end, rests against the wall (or 0.1 m off it): the sweep
+    stops at its body, which says it touches there, and reports the edge swept to the far
+    line (no third body fits between them), though it stopped short of it."""
+    wm, pts, rot = _scene(None, ang, {1: (D0, y1)})
+    beh, trace, _ = _run(wm, pts, _task(pts, rot, far=0.9))
+    hi, lo = parse_sweep_reason(beh.reason)
+    assert lo == -math.inf and hi >= 0.9
+    assert _local(trace, rot)[:, 0].max() < D0 - 2 * R + 0.01
+
+
+@pytest.mark.parametrize("fence, high, ang", [(0.35, 0.08, 22.5), (0.25, 0.04, 0.0),
+                                              (0.25, 0.08, 22.5), (0.2, 0.08, 0.0),
+                                              (0.15, 0.04, 0.0)])
+def test_a_wall_where_the_other_end_is_seen_is_not_its_body(fence, high, ang):
+    """A step ``high`` m tall stands out of the wall at x = 0.4-0.5, and a door 0.2 m wide
+    opens at x = 0.62 behind it; the fence edge 0-1 runs ``fence`` m off the wall. The
+    step's face is touched in the sector robot 1 (the edge's other end) is seen in, but
+    robot 1 is 0.4 m away and touches nobody. The sweep stops there (a robot may be in the
+    way) and reports the edge swept only as far as it got, short of the door: the fence
+    side stays open there. It used to take the step for robot 1's body and report the edge
+    swept to the far line (0.9) from x = 0.34, the door unseen: a side closed over a room."""
+    a, b = 0.62, 0.82
+    ring = [[-2, 0], [0.4, 0], [0.4, high], [0.5, high], [0.5, 0], [a, 0], [a, -0.1],
+            [-2, -0.1], [-2, -2], [3, -2], [3, -0.1], [b, -0.1], [b, 0], [3, 0], [3, 2],
+            [-2, 2]]
+    wm, pts, rot = _scene(None, ang, {0: (0.0, fence), 1: (D0, fence)}, ring=ring)
+    beh, trace, _ = _run(wm, pts, _task(pts, rot))
+    if beh.reason == "opening":                  # over the step and into the door
+        x, y = _local(trace, rot)[-1]
+        assert beh.task_state == "done" and a - 2 * R < x < b and y < 0.0
+        return
+    hi, _ = parse_sweep_reason(beh.reason)
+    assert hi * D0 <= _local(trace, rot)[:, 0].max() + 0.05 and hi * D0 < a
+
+
 def test_a_probe_that_touches_drives_its_approach_back_before_homing():
     """A probe's open-loop approach along its edge (one via landmark) that then touches
     the wall drives both legs back before homing on its vertex. Its vertex's landmarks

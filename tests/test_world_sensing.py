@@ -81,6 +81,20 @@ def test_touch_sectors_for_walls_and_robots(small):
     assert len(b.robot(3)["touch"]) == 0 and len(b.robot(4)["touch"]) == 0
 
 
+def test_a_wall_touch_is_no_robot_s_though_a_robot_is_seen_that_way(small):
+    """touch_robot is the robots' contacts only: a robot seen beyond a wall's corner in the
+    touched sector's span does not make the wall a robot. (It did: phase 2 of a wall sweep
+    along the small map's box ended on such 'bumps', and each end swept again.)"""
+    pos = np.array([[1.94, 1.29],                # 0: at the box's left face, by its corner
+                    [2.2, 0.9],                  # 1: seen from 0 below the corner, -56 deg
+                    [1.94 - 2 * R - 0.004, 1.29]])  # 2: touching 0 from the west
+    b = sensors(small, n_touch=8, skin=0.015).sense(pos, np.zeros(3))
+    assert 1 in seen(b, 0)
+    t0 = b.robot(0)
+    touched = dict(zip(np.round(t0["touch"], 6).tolist(), t0["touch_robot"].tolist()))
+    assert touched == {0.0: False, round(-math.pi / 4, 6): False, round(-math.pi, 6): True}
+
+
 def test_corner_touches_two_sectors(small):
     b = sensors(small, n_touch=4).sense(np.array([[R + 0.003, R + 0.003]]), np.zeros(1))
     assert sorted(b.robot(0)["touch"].tolist()) == pytest.approx([-math.pi, -math.pi / 2])

@@ -12,7 +12,8 @@ Bearings are body-frame, CCW positive, wrapped to [-pi, pi). Directed sighting a
 a's (noisy) bearing of b and ``back``: b's noisy bearing of a (what b would tell a).
 Touch sector k is centred on body bearing 2*pi*k/N_T and spans +-pi/N_T; it fires when a
 wall or robot surface is within ``skin`` of the body; ``touch_robot`` says whether a robot
-is visible within that sector's span.
+touches it there (the other robot feels the contact too and tells it, as neighbours tell
+each other their bearings: ``back``).
 """
 from __future__ import annotations
 
@@ -173,25 +174,24 @@ class Sensors:
         keep = None
         if self.dropout > 0 and m:
             keep = self.rng.random(m) >= self.dropout
-        # true visibility per (robot, sector), for touch_robot
-        vis_key = obs * self.n_touch + sector_of(true, self.n_touch)
         if keep is not None:
             obs, tgt, noisy, back = obs[keep], tgt[keep], noisy[keep], back[keep]
         order = np.lexsort((tgt, obs))
         obs, tgt, noisy, back = obs[order], tgt[order], noisy[order], back[order]
         cam_off = np.searchsorted(obs, np.arange(n + 1))
-        tr, ts = self._touch(pos, heading, tree)
-        key = tr * self.n_touch + ts
-        is_robot = np.isin(key, vis_key)
+        tr, ts, is_robot = self._touch(pos, heading, tree)
         touch_off = np.searchsorted(tr, np.arange(n + 1))
         return SenseBatch(n, obs, tgt, noisy, back, cam_off, tr, ts, self._centres[ts],
                           is_robot, touch_off, pairs)
 
     def _touch(self, pos, heading, tree):
-        """(robot index, sector) of every active touch sector, unique, sorted."""
+        """(robot index, sector, touched by a robot) of every active touch sector, unique,
+        sorted by (robot, sector). A sector touched by a robot (the other robot feels the
+        contact too and says so) is a robot's, whatever wall it also touches."""
         n = len(pos)
+        none = np.zeros(0, np.int64)
         if n == 0:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+            return none, none, np.zeros(0, bool)
         reach = self.radius + self.skin
         rob, dirs = [], []
         g = self.grid
@@ -210,6 +210,7 @@ class Sensors:
                 hit = dist < reach
                 rob.append(q[hit])
                 dirs.append(np.arctan2(v[hit, 1], v[hit, 0]) - heading[q[hit]])
+        n_wall = sum(len(x) for x in rob)
         if n >= 2:
             pr = tree.query_pairs(2 * self.radius + self.skin, output_type="ndarray")
             if len(pr):
@@ -219,8 +220,9 @@ class Sensors:
                 rob += [i, j]
                 dirs += [ang - heading[i], ang + math.pi - heading[j]]
         if not rob:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+            return none, none, np.zeros(0, bool)
         r = np.concatenate(rob)
         s = sector_of(np.concatenate(dirs), self.n_touch)
-        key = np.unique(r * self.n_touch + s)
-        return key // self.n_touch, key % self.n_touch
+        keys = r * self.n_touch + s
+        key = np.unique(keys)
+        return key // self.n_touch, key % self.n_touch, np.isin(key, keys[n_wall:])
