@@ -53,9 +53,10 @@ Phase 1 goes towards the edge's other end until it crosses the edge's perpendicu
 the perpendicular there. A phase stops short after sweep_budget_rv of travel, or when a
 robot's touch sector blocks the way (a robot seen in its span: a wall there may be one).
 The edge's other end blocking phase 1 counts as reaching ``sweep_far`` (no third body fits
-between them) only when it says it touches there (``Perception.told``): a wall touched in
-the sector the other end is seen in, 0.4 m short of it, once counted, and closed the fence
-side over a door behind it (tests/test_agent_sweep.py).
+between them) only when a robot says it touches there (``Perception.told``) and the other
+end is the only robot seen that way: a wall touched in the sector the other end is seen
+in, 0.4 m short of it, once counted, and closed the fence side over a door behind it; so
+would a third robot standing in the way (tests/test_agent_sweep.py).
 """
 from __future__ import annotations
 
@@ -74,6 +75,14 @@ _MIN_SPREAD = 1.0 - math.cos(math.radians(30.0))
 _BLEND = 0.3
 # turns round a wall's end (since the last turn into a wall) that make an opening
 OPEN_TURN = 3.0 * PI / 4.0
+
+
+def _only_other(c: float, seen: Mapping[int, float], other: int, tau: float) -> bool:
+    """Whether the robot touching in the sector centred on ``c`` (rad, body; +-tau) is
+    ``other``: it is seen in that span, and no other robot is seen within 2 tau of c (a
+    toucher's bearing lies in the span; a tau's margin for the bearings' noise)."""
+    return abs(wrap(seen[other] - c)) <= tau and not any(
+        i != other and abs(wrap(b - c)) <= 2.0 * tau for i, b in seen.items())
 
 
 def locate(bearings: Mapping[int, float], points: Mapping[int, tuple[float, float]]
@@ -328,7 +337,7 @@ class Sweep(ModeState):
             if self.phase == 2:
                 return self._end()
             if g.other in see.seen and any(
-                    abs(wrap(c - see.seen[g.other])) <= p.tau
+                    _only_other(c, see.seen, g.other, p.tau)
                     for c in see.told if blocks(body, c, p.tau)):
                 # the other end's body, by its own word: the wall goes on there
                 self.hi = max(self.hi, g.far)

@@ -290,6 +290,19 @@ def test_the_other_end_s_body_in_the_way_counts_as_the_far_line(y1, ang):
     assert _local(trace, rot)[:, 0].max() < D0 - 2 * R + 0.01
 
 
+@pytest.mark.parametrize("ang", [0.0, 22.5])
+@pytest.mark.parametrize("fence", [0.15, 0.2, 0.25])
+def test_a_third_robot_in_the_other_end_s_sector_is_not_its_body(fence, ang):
+    """Robot 9 rests against the wall at x = 0.45, in the touch sector robot 1 (the edge's
+    other end, ``fence`` m off the wall) is seen in. Robot 9 says it touches; the sweep
+    stops short of it and reports how far it got, not the far line: the wall beyond robot
+    9 is unswept. Taking any robot's word for the other end's closed the side (0.900)."""
+    wm, pts, rot = _scene(None, ang, {0: (0.0, fence), 1: (D0, fence), 9: (0.45, R + 0.002)})
+    beh, _, _ = _run(wm, pts, _task(pts, rot, far=0.9))
+    hi, lo = parse_sweep_reason(beh.reason)
+    assert lo == -math.inf and hi < 0.45 / D0
+
+
 @pytest.mark.parametrize("fence, high, ang", [(0.35, 0.08, 22.5), (0.25, 0.04, 0.0),
                                               (0.25, 0.08, 22.5), (0.2, 0.08, 0.0),
                                               (0.15, 0.04, 0.0)])
