@@ -152,7 +152,8 @@ class Sweeper:
         """'' or what blocks motion along the unit vector d: 'Q' (the edge's other end) or
         'robot', another robot within touch (2 r + SKIN) whose direction from R is within
         pi/2 - pi/N of d, or whose body it would overlap: the agent stops when a robot's
-        touch sector blocks its way (it knows Q by its bearing); robots do not overlap."""
+        touch sector blocks its way (it knows Q by its bearing, and only when no other robot
+        is there too); robots do not overlap."""
         if not self.others.size:
             return ""
         v = self.others - R
@@ -162,7 +163,7 @@ class Sweeper:
         if not near.any():
             return ""
         k = np.nonzero(near)[0]
-        if any(np.linalg.norm(self.others[j] - self.Q) < 1e-9 for j in k.tolist()):
+        if len(k) == 1 and np.linalg.norm(self.others[k[0]] - self.Q) < 1e-9:
             return "Q"
         return "robot"
 
