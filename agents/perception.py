@@ -77,13 +77,20 @@ class Perception:
         for i in seen:
             self.last_seen[i] = n
             self.last_seen_t[i] = t
-        self.told = [a for a, r in zip(s.touch, s.touch_robot) if r]
+        told: list[float] = []
+        bump: list[float] = []
+        obst: list[float] = []
         h = self.half
-        bump = [a for a, r in zip(s.touch, s.touch_robot)
-                if r or any(abs(wrap(b - a)) <= h for b in seen.values())]
-        self.obst = [a for a in s.touch if a not in bump] if bump else list(s.touch)
-        self.bump = bump
-        if self.bump:
+        for a, r in zip(s.touch, s.touch_robot):
+            if r:
+                told.append(a)
+                bump.append(a)
+            elif any(abs(wrap(b - a)) <= h for b in seen.values()):
+                bump.append(a)
+            else:
+                obst.append(a)
+        self.told, self.bump, self.obst = told, bump, obst
+        if bump:
             self.bumped_t = s.t
         return dt
 

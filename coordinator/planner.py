@@ -259,7 +259,8 @@ def _placing_first(fence):
 
 def _only_sweeps(fence) -> bool:
     """Whether every deployment ``fence`` offers is a wall sweep (and it offers one)."""
-    return any(fence.deployments.values()) and not _keeping(fence, lambda d: not d.sweep_far > 0)
+    deps = [d for lst in fence.deployments.values() for d in lst]
+    return bool(deps) and all(d.sweep_far > 0 for d in deps)
 
 
 def _without_probes(fence, skip):

@@ -8,9 +8,10 @@ import random
 import pytest
 from hypothesis import assume, given, settings, strategies as st
 
-from swarmcover.agents.behaviours import Behaviour
+from swarmcover.agents.behaviours import STOP, Behaviour
 from swarmcover.agents.params import AgentParams
-from swarmcover.bus.messages import Status, Task
+from swarmcover.agents.perception import Perception
+from swarmcover.bus.messages import Sense, Status, Task
 from test_agent_kinematics import KinSim, bearings_from, run
 
 PI = math.pi
@@ -445,9 +446,6 @@ def test_touch_sectors_read_as_walls_robots_seen_and_robots_that_say_so():
     """Perception sorts the touch sectors (8 of them, +-22.5 deg): ``told`` where another
     robot says it touches us (Sense.touch_robot), ``bump`` where a robot is seen within the
     sector's span or told (maybe a robot: not slid along), ``obst`` the rest."""
-    from swarmcover.agents.behaviours import STOP
-    from swarmcover.agents.perception import Perception
-    from swarmcover.bus.messages import Sense
     see = Perception(ME, 0.05, PI / 8)
     see.update(Sense(robot=ME, tick=0, t=0.0, ids=[1, 2], bearings=[0.3, 2.0],
                      back_bearings=[0.0, 0.0], touch=[0.0, PI / 2, -PI / 2, PI],
