@@ -54,9 +54,11 @@ the perpendicular there. A phase stops short after sweep_budget_rv of travel, or
 robot's touch sector blocks the way (a robot seen in its span: a wall there may be one).
 The edge's other end blocking phase 1 counts as reaching ``sweep_far`` (no third body fits
 between them) only when a robot says it touches there (``Perception.told``) and the other
-end is the only robot seen that way: a wall touched in the sector the other end is seen
-in, 0.4 m short of it, once counted, and closed the fence side over a door behind it; so
-would a third robot standing in the way (tests/test_agent_sweep.py).
+end is the only robot seen that way, on two Sense ticks in a row (the robot holds still
+for the second): a wall touched in the sector the other end is seen in, 0.4 m short of it,
+once counted, and closed the fence side over a door behind it; so would a third robot
+standing in the way, or one whose sighting a single tick dropped
+(tests/test_agent_sweep.py).
 """
 from __future__ import annotations
 
@@ -192,6 +194,7 @@ class Sweep(ModeState):
         self.travelled = 0.0                 # travel in this phase (m)
         self.mark = see.advance
         self.v = (0.0, 0.0)                  # last command (reference frame, m/s)
+        self.heard = False                   # the other end said it blocks us, last tick
 
     @classmethod
     def after(cls, out, task: Task, offset: float, ctx: Context) -> "Sweep":
@@ -336,13 +339,20 @@ class Sweep(ModeState):
         if self.travelled >= p.sweep_budget_rv * p.rv or bumps:
             if self.phase == 2:
                 return self._end()
-            if g.other in see.seen and any(
-                    _only_other(c, see.seen, g.other, p.tau)
-                    for c in see.told if blocks(body, c, p.tau)):
+            says = g.other in see.seen and any(
+                _only_other(c, see.seen, g.other, p.tau)
+                for c in see.told if blocks(body, c, p.tau))
+            if says and not self.heard:
+                # one Sense tick's word (its sightings may have dropped a third robot):
+                # hold still, and hear it again on the next before it closes anything
+                self.heard, self.v = True, (0.0, 0.0)
+                return Tick()
+            if says:
                 # the other end's body, by its own word: the wall goes on there
                 self.hi = max(self.hi, g.far)
             self._phase_two()
             return Tick()
+        self.heard = False
         if self.turned >= OPEN_TURN - 1e-9:
             # an opening: into it along the normal of the wall it went round
             self.into, self.before, self.travelled = self.n0, self.travelled, 0.0

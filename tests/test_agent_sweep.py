@@ -132,10 +132,11 @@ def _task(pts, rot, far=0.9, stop_deg=10.0, direction_deg=-70.0, depth=0.75):
                 sweep_points=[c * D0 for k in lms for c in shape[k]]).validate()
 
 
-def _run(wm, pts, task, ticks=1500, noise_deg=0.5, seed=0, params=None):
+def _run(wm, pts, task, ticks=1500, noise_deg=0.5, seed=0, params=None, camera=None):
     """Robot 0 runs ``task`` with the world's physics and sensors (the others hold still),
-    with ``params`` (AgentParams(), the defaults, if None): (behaviour, trace of robot 0's
-    (x, y) per tick, its mode per tick)."""
+    with ``params`` (AgentParams(), the defaults, if None); ``camera`` (if any) rewrites
+    robot 0's Sense fields each tick: (behaviour, trace of robot 0's (x, y) per tick, its
+    mode per tick)."""
     phys = Physics(wm, radius=R, v_max=0.5, w_max=2.0, dt=0.05)
     sens = Sensors(wm, 1.0, radius=R, noise_sigma=math.radians(noise_deg), n_touch=8,
                    skin=0.015, rng=np.random.default_rng(seed))
@@ -148,7 +149,8 @@ def _run(wm, pts, task, ticks=1500, noise_deg=0.5, seed=0, params=None):
         ids, pos, th = phys.state()
         k0 = ids.index(0)
         per = sens.sense(pos, th).lists(ids)
-        cmd = beh.step(Sense(robot=0, tick=tick, t=tick * 0.05, **per[k0]))
+        mine = camera(per[k0]) if camera else per[k0]
+        cmd = beh.step(Sense(robot=0, tick=tick, t=tick * 0.05, **mine))
         trace.append(tuple(pos[k0]))
         modes.append(beh.mode)
         cmds = np.zeros((len(ids), 3))
@@ -300,6 +302,36 @@ def test_a_third_robot_in_the_other_end_s_sector_is_not_its_body(fence, ang):
     wm, pts, rot = _scene(None, ang, {0: (0.0, fence), 1: (D0, fence), 9: (0.45, R + 0.002)})
     beh, _, _ = _run(wm, pts, _task(pts, rot, far=0.9))
     hi, lo = parse_sweep_reason(beh.reason)
+    assert lo == -math.inf and hi < 0.45 / D0
+
+
+class _DropOnce:
+    """A camera that drops robot ``who`` from the first Sense tick on which a robot says it
+    touches robot 0 (one packet's dropout, at the worst moment)."""
+
+    def __init__(self, who: int):
+        self.who, self.dropped = who, 0
+
+    def __call__(self, per: dict) -> dict:
+        if self.dropped or not any(per["touch_robot"]) or self.who not in per["ids"]:
+            return per
+        self.dropped += 1
+        keep = [k for k, i in enumerate(per["ids"]) if i != self.who]
+        return {**per, **{f: [per[f][k] for k in keep] for f in ("ids", "bearings", "back_bearings")}}
+
+
+@pytest.mark.parametrize("ang", [0.0, 22.5])
+@pytest.mark.parametrize("fence", [0.15, 0.2, 0.25])
+def test_one_tick_that_drops_the_third_robot_does_not_close_the_side(fence, ang):
+    """The third robot's scene, with robot 9's sighting dropped from robot 0's camera on the
+    tick robot 9 first says it touches: that one tick shows the other end alone in the
+    sector. The sweep hears the word again on the next tick before it closes anything, and
+    reports only how far it got. On one tick's word it reported the far line (0.900)."""
+    wm, pts, rot = _scene(None, ang, {0: (0.0, fence), 1: (D0, fence), 9: (0.45, R + 0.002)})
+    cam = _DropOnce(9)
+    beh, _, _ = _run(wm, pts, _task(pts, rot, far=0.9), camera=cam)
+    hi, lo = parse_sweep_reason(beh.reason)
+    assert cam.dropped == 1
     assert lo == -math.inf and hi < 0.45 / D0
 
 
