@@ -211,8 +211,10 @@ class Behaviour:
                       pose=list(pose or []), tick=tick, **self.status())
 
     def status(self) -> dict:
-        """Status fields (robot, seq, t, kind, live, pose are the caller's)."""
-        seen = self.see.seen
+        """Status fields (robot, seq, t, kind, live, pose are the caller's). The neighbours
+        are those whose link is not lost (seen within link_lost_ticks): a camera frame that
+        misses one does not take its edge out of the coordinator's complex."""
+        seen = self.see.recent(self.p.link_lost_ticks)
         ids = list(seen)
         window = self._mode.still_window()
         if window is not None:   # holding still: the window averages

@@ -20,7 +20,7 @@ class Perception:
     """One robot's view of the world, refreshed by :meth:`update` once per Sense tick."""
 
     __slots__ = ("robot", "half", "n", "t", "tick", "dt", "seen", "back", "obst", "bump", "told",
-                 "last_seen", "last_seen_t", "bumped_t", "heading", "advance")
+                 "last_seen", "last_seen_t", "last_b", "bumped_t", "heading", "advance")
 
     def __init__(self, robot: int, dt: float, half: float):
         self.robot = robot
@@ -37,6 +37,7 @@ class Perception:
         self.told: list[float] = []        # another robot says it touches us there
         self.last_seen: dict[int, int] = {}      # neighbour id -> tick index last seen
         self.last_seen_t: dict[int, float] = {}  # neighbour id -> Sense.t last seen (s)
+        self.last_b: dict[int, float] = {}       # neighbour id -> bearing last seen at (rad)
         self.bumped_t = -1e18        # last time another robot touched us (s)
         # dead reckoning of our own commands (open-loop modes and fallbacks only)
         self.heading = 0.0           # integral of commanded wz (rad)
@@ -74,9 +75,10 @@ class Perception:
         self.seen = seen
         self.back = back
         n, t = self.n, s.t
-        for i in seen:
+        for i, b in seen.items():
             self.last_seen[i] = n
             self.last_seen_t[i] = t
+            self.last_b[i] = b
         told: list[float] = []
         bump: list[float] = []
         obst: list[float] = []
@@ -93,6 +95,17 @@ class Perception:
         if bump:
             self.bumped_t = s.t
         return dt
+
+    def recent(self, ticks: int) -> dict[int, float]:
+        """The neighbours seen within the last ``ticks`` ticks (``ticks_unseen`` < ticks: a
+        link not yet lost) -> the bearing each was last seen at (rad, body frame); this
+        tick's first. One frame that misses a neighbour does not drop it."""
+        out = dict(self.seen)
+        n = self.n
+        for i, k in self.last_seen.items():
+            if n - k < ticks and i not in out:
+                out[i] = self.last_b[i]
+        return out
 
     def ticks_unseen(self, landmark: int) -> int:
         """Ticks since ``landmark`` was last seen (0: seen this tick; huge: never)."""

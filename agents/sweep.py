@@ -224,7 +224,7 @@ class Sweep(ModeState):
 
     def _phase_two(self) -> None:
         """Back towards the vertex: the other hand, counts from zero."""
-        self.phase, self.h = 2, -self.h
+        self.phase, self.h, self.heard = 2, -self.h, False
         self.lost = self.travelled = self.turned = self.wound = self.steady = 0.0
         self.ref, self.ref_at = self.n, self.R
 

@@ -522,7 +522,8 @@ TASK_STATES = ("none", "running", "done", "failed")
 class Status(Message):
     """Agent -> coordinator, a few Hz and on every task change.
 
-    nbr_ids/nbr_bearings: neighbours seen now (filtered while still), body frame (rad).
+    nbr_ids/nbr_bearings: neighbours whose link is not lost (seen within the agent's
+      link_lost_ticks; last seen bearing, averaged while still), body frame (rad).
     contact/contact_bearing: sticky obstacle contact (spec 3.5), body frame (rad).
     pose: [x, y, theta] as reported by the robot's body (telemetry only, may be []).
     touch_offset: a test drive that failed with "touch": the angle (rad, CCW) from the

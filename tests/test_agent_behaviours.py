@@ -454,3 +454,26 @@ def test_touch_sectors_read_as_walls_robots_seen_and_robots_that_say_so():
     assert see.bump == [0.0, PI / 2]               # robot 1 seen at 17 deg, in sector 0
     assert see.obst == [-PI / 2, PI]
     assert see.bumped_t == 0.0
+
+
+def test_status_keeps_a_neighbour_one_frame_missed_until_its_link_is_lost():
+    """Status reports the neighbours whose link is not lost: one camera frame that misses
+    robot 2 (a dropped sighting) keeps it at the bearing it was last seen at; it goes once
+    unseen for link_lost_ticks. It used to go on the first frame: one dropped sighting took
+    an edge out of the coordinator's complex (5% camera dropout: small hit robots_max)."""
+    p = AgentParams()
+    beh = Behaviour(p, ME)
+
+    def frame(tick, ids):
+        b = {1: 0.1, 2: 2.0, 3: -2.0}
+        beh.step(Sense(robot=ME, tick=tick, t=0.05 * tick, ids=ids, bearings=[b[i] for i in ids],
+                       back_bearings=[0.0] * len(ids)).validate())
+        st = status_ok(beh)
+        return dict(zip(st["nbr_ids"], st["nbr_bearings"]))
+
+    assert frame(0, [1, 2, 3]) == {1: 0.1, 2: 2.0, 3: -2.0}
+    assert frame(1, [1, 3]) == {1: 0.1, 2: 2.0, 3: -2.0}      # one frame missed it
+    assert frame(2, [1, 2, 3]) == {1: 0.1, 2: 2.0, 3: -2.0}
+    for k in range(3, 3 + p.link_lost_ticks - 1):
+        assert 2 in frame(k, [1, 3])
+    assert frame(3 + p.link_lost_ticks - 1, [1, 3]) == {1: 0.1, 3: -2.0}   # lost
