@@ -10,6 +10,7 @@ on stderr, and one JSON object as the last line.
     python bench/coverage.py                       # all configs, distributed
     python bench/coverage.py configs/small.toml --inproc --seeds 0 1 2
     python bench/coverage.py --both --seeds 0      # every config both ways
+    python bench/coverage.py --inproc --dropout 0.05   # 5% of the sightings lost
 
 Targets (issue 19, against the Euler lower bound ``euler_bound`` that summary.json reports
 for every run): certified with ground-truth coverage >= 99.5%; robots_used <= 1.25 x
@@ -28,6 +29,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -48,7 +50,8 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def run_inproc(config: str, seed: int, timeout: float, overrides: dict | None = None) -> dict:
+def run_inproc(config: str, seed: int, timeout: float, overrides: dict | None = None,
+               dropout: float | None = None) -> dict:
     from swarmcover.bus.messages import Truth
     from swarmcover.run import compute_summary
     from swarmcover.simloop import SimLoop
@@ -56,6 +59,8 @@ def run_inproc(config: str, seed: int, timeout: float, overrides: dict | None = 
     from swarmcover.run import default_robots_max
     from swarmcover.world.maps import build_map
     cfg = load_config(config)
+    if dropout is not None:   # every camera frame loses each sighting with this probability
+        cfg = replace(cfg, sensing=replace(cfg.sensing, dropout=dropout))
     cfg, _, limits = default_robots_max(cfg, build_map(cfg), "")  # as `run` does
     sim = SimLoop(cfg, seed=seed, coordinator_overrides=overrides)
     t0 = time.monotonic()
@@ -181,7 +186,14 @@ def main(argv=None) -> int:
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                    help="with --inproc: override a [coordinator] field, e.g. door_min_rv=0.3 "
                         "(a TOML value; checked like the config's own)")
+    p.add_argument("--dropout", type=float, default=None, metavar="P",
+                   help="with --inproc: [sensing] dropout for every config (each sighting of "
+                        "each camera frame lost with probability P, 0 <= P < 1)")
     args = p.parse_args(argv)
+    if args.dropout is not None and not (0.0 <= args.dropout < 1.0):
+        p.error(f"--dropout {args.dropout}: expected 0 <= P < 1")
+    if args.dropout is not None and not args.inproc:
+        p.error("--dropout needs --inproc (a distributed run reads [sensing] from its config)")
     overrides = {}
     for item in args.set:
         import tomllib
@@ -208,7 +220,7 @@ def main(argv=None) -> int:
             print(f"[{k + 1}/{len(configs)}] {name} seed {seed} ({mode}) ... "
                   f"elapsed {time.monotonic() - t0:.0f} s", file=sys.stderr, flush=True)
             if mode == "inproc":
-                s = run_inproc(config, seed, args.timeout, overrides)
+                s = run_inproc(config, seed, args.timeout, overrides, args.dropout)
             else:
                 with tempfile.TemporaryDirectory() as d:
                     s = run_distributed(config, seed, Path(d) / "run", args.timeout)
@@ -235,7 +247,7 @@ def main(argv=None) -> int:
     if pairs:
         print(agreement_table(pairs), flush=True)
     from swarmcover.run import strict_json
-    print(strict_json({"bench": "coverage", "overrides": overrides,
+    print(strict_json({"bench": "coverage", "overrides": overrides, "dropout": args.dropout,
                        "runs": [{k: s.get(k) for k in keys} for s in results],
                        "both": pairs}))
     return 0

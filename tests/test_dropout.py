@@ -8,6 +8,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
+from bench import coverage
 from swarmcover.run import compute_summary
 from swarmcover.simloop import SimLoop
 from swarmcover.world.config import load_config
@@ -33,3 +36,12 @@ def test_five_percent_camera_dropout_still_certifies_the_tiny_room_covered(tmp_p
     assert s["certified"] and s["stop_reason"] == "certified"
     assert s["coverage"] >= 0.995 and not s["false_certificate"]
     assert s["robots_used"] <= 1.5 * s["euler_bound"]
+
+
+def test_the_coverage_bench_sets_dropout_in_process_only_and_names_a_bad_value(capsys):
+    for argv, says in ((["configs/tiny.toml", "--dropout", "0.05"], "--dropout needs --inproc"),
+                       (["configs/tiny.toml", "--inproc", "--dropout", "1.5"],
+                        "--dropout 1.5: expected 0 <= P < 1")):
+        with pytest.raises(SystemExit):
+            coverage.main(argv)
+        assert says in capsys.readouterr().err
