@@ -73,7 +73,7 @@ def run_inproc(config: str, seed: int, timeout: float, overrides: dict | None = 
                  stop_reason=_inproc_reason(res), stop_detail=res.stop_reason,
                  wall_time_s=time.monotonic() - t0, robots_spawned=res.robots_spawned,
                  failures_healed=res.deployer.failures_healed, config=config, seed=seed,
-                 mode="inproc", **limits)
+                 mode="inproc", dropout=cfg.sensing.dropout, **limits)
     return compute_summary(cfg, sim.wm, truth, res.final, extra)
 
 
@@ -242,7 +242,7 @@ def main(argv=None) -> int:
             "robots_per_bound", "sim_s_per_robot", "ideal_count", "ratio", "mean_spacing",
             "ideal_count_same_spacing", "ratio_same_spacing", "coverage", "false_certificate",
             "uncovered_reachable_m2", "cycles", "sim_time_s", "wall_time_s", "mode",
-            "move_s", "enter_s", "push_floor_s", "s_per_robot_over_floor")
+            "move_s", "enter_s", "push_floor_s", "s_per_robot_over_floor", "dropout")
     print(table(results), flush=True)
     if pairs:
         print(agreement_table(pairs), flush=True)

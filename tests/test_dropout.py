@@ -3,7 +3,8 @@
 (ground truth) and uses about the robots it uses without dropout (12). When a robot's
 Status listed only the neighbours its last frame saw, every dropped sighting took an edge
 out of the coordinator's complex: the run never certified (42 robots after 1,472 s
-simulated, against an Euler bound of 13)."""
+simulated, against an Euler bound of 13). The run goes through ``bench/coverage.py``'s
+``--dropout``, which sets the config's ``[sensing] dropout``."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -11,28 +12,14 @@ from pathlib import Path
 import pytest
 
 from bench import coverage
-from swarmcover.run import compute_summary
-from swarmcover.simloop import SimLoop
-from swarmcover.world.config import load_config
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_five_percent_camera_dropout_still_certifies_the_tiny_room_covered(tmp_path):
-    text = (ROOT / "configs" / "tiny.toml").read_text()
-    assert "dropout" not in text
-    cfg_path = tmp_path / "tiny_dropout.toml"
-    cfg_path.write_text(text.replace("[sensing]\n", "[sensing]\ndropout = 0.05\n"))
-    cfg = load_config(str(cfg_path))
-    assert cfg.sensing.dropout == 0.05
-    sim = SimLoop(cfg, seed=0)
-    res = sim.run(max_sim_s=1500, max_wall_s=120)
-    ids = sorted(res.positions)
-    truth = type("T", (), dict(ids=ids, x=[res.positions[i][0] for i in ids],
-                               y=[res.positions[i][1] for i in ids]))
-    s = compute_summary(cfg, sim.wm, truth, res.final,
-                        dict(certified=res.certified, cycles=res.cycles,
-                             sim_time_s=res.sim_time_s, robots_spawned=res.robots_spawned))
+def test_five_percent_camera_dropout_still_certifies_the_tiny_room_covered():
+    assert "dropout" not in (ROOT / "configs" / "tiny.toml").read_text()
+    s = coverage.run_inproc(str(ROOT / "configs" / "tiny.toml"), 0, 120.0, dropout=0.05)
+    assert s["dropout"] == 0.05
     assert s["certified"] and s["stop_reason"] == "certified"
     assert s["coverage"] >= 0.995 and not s["false_certificate"]
     assert s["robots_used"] <= 1.5 * s["euler_bound"]
