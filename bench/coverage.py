@@ -40,7 +40,9 @@ def run_distributed(config: str, seed: int, out: Path, timeout: float) -> dict:
            "--out", str(out), "--quiet", "--port", str(_free_port()), "--wall-timeout", str(timeout)]
     subprocess.run(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                    timeout=timeout + 120)
-    return json.loads((out / "summary.json").read_text())
+    from swarmcover.world.config import load_config
+    return dict(json.loads((out / "summary.json").read_text()),
+                dropout=load_config(config).sensing.dropout)
 
 
 def _free_port() -> int:
