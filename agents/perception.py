@@ -74,11 +74,9 @@ class Perception:
             back[i] = bb
         self.seen = seen
         self.back = back
-        n, t = self.n, s.t
-        for i, b in seen.items():
-            self.last_seen[i] = n
-            self.last_seen_t[i] = t
-            self.last_b[i] = b
+        self.last_seen.update(dict.fromkeys(seen, self.n))
+        self.last_seen_t.update(dict.fromkeys(seen, s.t))
+        self.last_b.update(seen)
         told: list[float] = []
         bump: list[float] = []
         obst: list[float] = []
