@@ -1,0 +1,194 @@
+"""The whole swarm on maps no config was tuned on: does "certified" mean covered there?
+
+``bench/truth.py`` judges the coordinator's rules on 500 random maps, but executes each
+deployment geometrically (its sweeps are ``bench/sweep.py``'s emulation). This bench runs
+the product itself on the same random maps: every robot an agent (bearing-only
+controllers, the real wall sweep, touch sensors), pymunk physics, the coordinator, all in
+one process (``swarmcover.simloop``, the same nodes as ``swarmcover run``), and judges
+the end by the world's ground truth (``swarmcover.run.compute_summary``: raster coverage
+and the reachable uncovered area behind a certificate).
+
+Each map (``bench.truth.make_map``: rectangles, L-shapes, boxes, clutter, two rooms joined
+by a 0.3-1.2 rv door; a third of the sources 0.3 m from a wall facing it; 0.5 deg bearing
+noise on odd maps) is written as a run config into ``--out`` (default: a temporary
+folder), so any run can be repeated with ``swarmcover run CONFIG``. With ``--ros K`` every
+K-th map is turned 5-40 deg and written as a ROS map_server map (PGM + YAML at 0.05 m):
+walls in raster steps, loaded through the world's map import.
+
+    python bench/unseen.py --maps 20 --jobs 2            # maps 0-19 of campaign seed 0
+    python bench/unseen.py --maps 40 --seed 1 --ros 2 --out /tmp/unseen
+
+Prints a row per map, a summary, and one JSON object as the last line. A false
+certificate is what ``swarmcover run`` calls one: certified while more than
+``FALSE_CERT_M2`` x rv^2 of free area a robot could reach is uncovered.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench.common import eprint  # noqa: E402
+
+CELL = 0.05   # m, the ROS maps' resolution (configs/cave.toml's)
+
+
+def _pts(a) -> str:
+    return "[" + ", ".join(f"[{x:.4f}, {y:.4f}]" for x, y in np.asarray(a, float)) + "]"
+
+
+def _write_pgm(pm, stem: Path) -> None:
+    """``pm`` (a raster-traced map: rings on a CELL grid) as ``stem``.pgm + .yaml."""
+    lo = pm.outer.min(axis=0) - 2 * CELL
+    nx, ny = np.round((pm.outer.max(axis=0) + 2 * CELL - lo) / CELL).astype(int)
+    xs, ys = lo[0] + (np.arange(nx) + 0.5) * CELL, lo[1] + (np.arange(ny) + 0.5) * CELL
+    gx, gy = np.meshgrid(xs, ys)
+    free = pm.contains(np.stack([gx.ravel(), gy.ravel()], 1)).reshape(ny, nx)
+    img = np.where(free, 254, 0).astype(np.uint8)[::-1]          # row 0 is the top
+    with open(stem.with_suffix(".pgm"), "wb") as f:
+        f.write(b"P5\n%d %d\n255\n" % (nx, ny))
+        f.write(img.tobytes())
+    stem.with_suffix(".yaml").write_text(
+        f"image: {stem.name}.pgm\nresolution: {CELL}\norigin: [{lo[0]:.4f}, {lo[1]:.4f}, 0.0]\n"
+        "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
+
+
+def write_config(seed: int, index: int, ros: bool, folder: Path):
+    """Map ``index`` of campaign ``seed`` as a run config in ``folder``; returns (path, case)."""
+    from bench.truth import make_map
+    case = make_map(seed, index, CELL if ros else 0.0)
+    name = f"unseen_s{seed}_m{index}" + ("_ros" if ros else "")
+    lines = [f'# bench/unseen.py: map {index} of campaign {seed} ({case.kind}'
+             + (f", door {case.door_w:.2f} rv" if case.door_w else "") + ")",
+             f'name = "{name}"', "rv = 1.0", "", "[map]"]
+    if ros:
+        _write_pgm(case.pm, folder / name)
+        lines.append(f'ros_map = "{name}.yaml"')
+    else:
+        lines.append(f"boundary = {_pts(case.pm.outer)}")
+        lines.append("obstacles = [" + ", ".join(
+            f'{{type = "polygon", points = {_pts(h)}}}' for h in case.pm.holes) + "]")
+    x, y = case.source
+    theta = max(-3.1415, min(3.1415, case.source_dir))   # printed to 4 places: inside +-pi
+    lines += [f"sources = [{{x = {x:.4f}, y = {y:.4f}, theta = {theta:.4f}}}]", "",
+              "[robots]", "radius = 0.06", 'kind = "holonomic"', "",
+              "[sensing]", f"noise_deg = {case.noise_deg}", "", "[world]", "dt = 0.05",
+              'mode = "lockstep"', f"seed = {index}", ""]
+    path = folder / f"{name}.toml"
+    path.write_text("\n".join(lines))
+    return path, case
+
+
+def run_map(job) -> dict:
+    """One map: write its config, run it in-process, judge it by ground truth."""
+    seed, index, ros, folder, timeout = job
+    from bench.coverage import run_inproc
+    path, case = write_config(seed, index, ros, Path(folder))
+    row = dict(seed=seed, index=index, kind=case.kind, ros=ros, facing_wall=case.facing_wall,
+               door_rv=case.door_w, noise_deg=case.noise_deg, config=str(path))
+    t0 = time.monotonic()
+    try:
+        s = run_inproc(str(path), 0, timeout)
+    except Exception as e:  # a crash is a result here: the row says which map and why
+        return dict(row, error=f"{type(e).__name__}: {e}", wall_s=time.monotonic() - t0)
+    keep = ("certified", "stop_reason", "coverage", "false_certificate", "uncovered_reachable_m2",
+            "false_certificate_where", "robots_used", "euler_bound", "robots_per_bound",
+            "sim_time_s", "sim_s_per_robot", "cycles")
+    return dict(row, **{k: s.get(k) for k in keep}, wall_s=round(time.monotonic() - t0, 1))
+
+
+def summarise(rows: list[dict]) -> dict:
+    ok = [r for r in rows if "error" not in r]
+    cert = [r for r in ok if r["certified"]]
+    rpb = [r["robots_per_bound"] for r in cert if r.get("robots_per_bound")]
+    return dict(maps=len(rows), errors=len(rows) - len(ok), certified=len(cert),
+                false_certificates=sum(bool(r["false_certificate"]) for r in ok),
+                not_certified=[r["index"] for r in ok if not r["certified"]],
+                false_maps=[r["index"] for r in ok if r["false_certificate"]],
+                min_coverage_certified=min((r["coverage"] for r in cert), default=None),
+                robots_per_bound_mean=(sum(rpb) / len(rpb)) if rpb else None,
+                sim_s_per_robot_mean=(sum(r["sim_s_per_robot"] for r in cert) / len(cert))
+                if cert else None)
+
+
+def _line(r: dict) -> str:
+    head = (f"map {r['index']:3d} {r['kind']:9s}{' ros' if r['ros'] else '    '}"
+            f" door {r['door_rv'] or 0:.2f} {'facing' if r['facing_wall'] else '      '}")
+    if "error" in r:
+        return f"{head}  ERROR {r['error']}"
+    warn = "  FALSE CERTIFICATE at %s" % (r.get("false_certificate_where"),) \
+        if r["false_certificate"] else ""
+    return (f"{head}  {'certified' if r['certified'] else r['stop_reason']:<12s}"
+            f" coverage {100 * r['coverage']:6.2f}%  robots {r['robots_used']:3d}"
+            f" / bound {r['euler_bound']}  sim {r['sim_time_s']:7.1f} s"
+            f"  wall {r['wall_s']:5.1f} s{warn}")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--maps", type=int, default=20, help="maps START .. START+N-1")
+    ap.add_argument("--start", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0, help="campaign (bench/truth.py's --seed)")
+    ap.add_argument("--ros", type=int, default=0, metavar="K",
+                    help="write every K-th map as a turned ROS map (PGM + YAML); 0: none")
+    ap.add_argument("--jobs", type=int, default=1, help="worker processes")
+    ap.add_argument("--timeout", type=float, default=900.0, help="wall seconds per map")
+    ap.add_argument("--out", help="folder for the configs and results.json (default: temporary)")
+    a = ap.parse_args(argv)
+    for name in ("maps", "jobs"):
+        if getattr(a, name) < 1:
+            ap.error(f"--{name} must be >= 1, got {getattr(a, name)}")
+    if a.ros < 0 or a.start < 0:
+        ap.error("--ros and --start must be >= 0")
+    tmp = None
+    if a.out:
+        folder = Path(a.out)
+        folder.mkdir(parents=True, exist_ok=True)
+    else:
+        tmp = tempfile.TemporaryDirectory(prefix="unseen-")
+        folder = Path(tmp.name)
+    jobs = [(a.seed, i, bool(a.ros) and i % a.ros == a.ros - 1, str(folder), a.timeout)
+            for i in range(a.start, a.start + a.maps)]
+    rows: list[dict] = []
+    t0 = time.monotonic()
+
+    def took(r):
+        rows.append(r)
+        eprint(f"[{len(rows)}/{len(jobs)} {time.monotonic() - t0:.0f} s] {_line(r)}")
+
+    if a.jobs > 1:
+        import multiprocessing as mp
+        with mp.get_context("spawn").Pool(a.jobs, maxtasksperchild=1) as pool:
+            for r in pool.imap_unordered(run_map, jobs):
+                took(r)
+    else:
+        for j in jobs:
+            took(run_map(j))
+    rows.sort(key=lambda r: r["index"])
+    for r in rows:
+        print(_line(r))
+    s = summarise(rows)
+    s["wall_s"] = round(time.monotonic() - t0, 1)
+    print(f"\n{s['certified']} of {s['maps']} certified, {s['false_certificates']} false "
+          f"certificates, {s['errors']} errors; not certified: {s['not_certified'] or 'none'}; "
+          f"robots / Euler bound {s['robots_per_bound_mean'] or math.nan:.2f} on average; "
+          f"wall {s['wall_s']} s")
+    if a.out:
+        (folder / "results.json").write_text(json.dumps({"summary": s, "maps": rows}, indent=1))
+    print(json.dumps({"bench": "unseen", "seed": a.seed, "summary": s, "maps": rows}))
+    if tmp is not None:
+        tmp.cleanup()
+    return 1 if s["false_certificates"] or s["errors"] else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

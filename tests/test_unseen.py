@@ -1,0 +1,52 @@
+"""bench/unseen.py: the whole swarm on bench/truth.py's random maps, written as run configs
+(polygons, or turned ROS map_server maps) and judged by the world's ground truth."""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from bench import unseen
+from bench.truth import _area, make_map
+from swarmcover.world.config import load_config
+from swarmcover.world.maps import build_map
+
+
+def _free(pm) -> float:
+    return abs(_area(pm.outer)) - sum(abs(_area(h)) for h in pm.holes)
+
+
+@pytest.mark.parametrize("index, ros", [(0, False), (1, True), (5, True), (6, False)])
+def test_a_map_written_as_a_config_loads_as_the_same_free_area_and_source(tmp_path, index, ros):
+    """The config (boundary and polygon obstacles, or PGM + YAML at 0.05 m) is what the
+    world loads: the same free area as the campaign's map, the source where it was, its
+    heading inside the config's range (map 6's faces the wall at exactly pi)."""
+    path, case = unseen.write_config(0, index, ros, tmp_path)
+    cfg = load_config(str(path))
+    wm = build_map(cfg)
+    want = _free(make_map(0, index, unseen.CELL if ros else 0.0).pm)
+    assert wm.free_area == pytest.approx(want, abs=1e-3)       # vertices written to 0.1 mm
+    assert tuple(wm.sources[0][:2]) == pytest.approx(case.source, abs=1e-4)
+    assert abs(cfg.map.sources[0][2]) <= math.pi
+    assert cfg.sensing.noise_deg == case.noise_deg
+
+
+def test_one_map_runs_the_swarm_to_a_certificate_ground_truth_agrees_with(tmp_path):
+    """Map 2 (a 12.7 m^2 room, 25 robots) end to end, in-process: certified, covered by
+    ground truth, no false certificate, and the row names its config."""
+    row = unseen.run_map((0, 2, False, str(tmp_path), 300.0))
+    assert "error" not in row, row.get("error")
+    assert row["certified"] and not row["false_certificate"] and row["coverage"] >= 0.995
+    assert row["config"].endswith("unseen_s0_m2.toml")
+    s = unseen.summarise([row, dict(row, index=3, certified=False, false_certificate=False),
+                          dict(index=4, error="boom")])
+    assert (s["certified"], s["errors"], s["not_certified"], s["false_certificates"]) == \
+        (1, 1, [3], 0)
+
+
+@pytest.mark.parametrize("argv", [["--maps", "0"], ["--jobs", "0"], ["--ros", "-1"]])
+def test_bad_flags_are_usage_errors_naming_the_flag(argv, capsys):
+    with pytest.raises(SystemExit) as e:
+        unseen.main(argv)
+    assert e.value.code == 2
+    assert argv[0] in capsys.readouterr().err
