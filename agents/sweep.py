@@ -77,9 +77,6 @@ _MIN_SPREAD = 1.0 - math.cos(math.radians(30.0))
 _BLEND = 0.3
 # turns round a wall's end (since the last turn into a wall) that make an opening
 OPEN_TURN = 3.0 * PI / 4.0
-# Sense ticks in a row a touch sector with a robot seen in it and nobody saying it touches
-# us must last before the sweep takes it for a wall (one tick's word decides nothing)
-SILENT_TICKS = 2
 
 
 def _only_other(c: float, seen: Mapping[int, float], other: int, tau: float) -> bool:
@@ -198,7 +195,6 @@ class Sweep(ModeState):
         self.mark = see.advance
         self.v = (0.0, 0.0)                  # last command (reference frame, m/s)
         self.heard = False                   # the other end said it blocks us, last tick
-        self.silent = 0                      # ticks in a row with a silent "maybe robot" touch
 
     @classmethod
     def after(cls, out, task: Task, offset: float, ctx: Context) -> "Sweep":
@@ -289,16 +285,7 @@ class Sweep(ModeState):
         step = max(0.0, see.advance - self.mark)
         self.mark = see.advance
         self.travelled += step
-        # touch sectors a robot is seen in that no robot says it touches (Perception.bump
-        # less told): the spec's "maybe a robot". A robot that touches us says so (both feel
-        # the contact), so one still silent on the next tick is a wall: a door's jamb with
-        # a robot seen through the door stopped both jambs' sweeps, and the gap closed as
-        # 'sweep_gap' over the door (bench/unseen.py seed 0 maps 8 and 18, 57-74% coverage)
-        silent = [c for c in see.bump if c not in see.told]
-        self.silent = self.silent + 1 if silent else 0
-        walled = self.silent >= SILENT_TICKS
-        obst, bump = (see.obst + silent, see.told) if walled else (see.obst, see.bump)
-        felt = self._felt(psi, obst)
+        felt = self._felt(psi, see.obst)
         fix = locate({l: wrap(b - psi) for l, b in see.seen.items() if l in g.points}, g.points)
         if self.R is None:
             if fix is None:
@@ -348,11 +335,7 @@ class Sweep(ModeState):
         d = wrap(math.atan2(math.cos(p.press) * math.sin(t) + math.sin(p.press) * math.sin(self.n),
                             math.cos(p.press) * math.cos(t) + math.sin(p.press) * math.cos(self.n)))
         body = wrap(d + psi)
-        bumps = [c for c in bump if blocks(body, c, p.tau)]
-        if bumps and self.silent and not any(c in see.told for c in bumps):
-            # only silent robots' sectors block the way: hold still and hear it again
-            self.v = (0.0, 0.0)
-            return Tick()
+        bumps = [c for c in see.bump if blocks(body, c, p.tau)]
         if self.travelled >= p.sweep_budget_rv * p.rv or bumps:
             if self.phase == 2:
                 return self._end()
