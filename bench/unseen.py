@@ -100,7 +100,7 @@ def run_map(job) -> dict:
         s = run_inproc(str(path), 0, timeout)
     except Exception as e:  # a crash is a result here: the row says which map and why
         return dict(row, error=f"{type(e).__name__}: {e}", wall_s=time.monotonic() - t0)
-    keep = ("certified", "stop_reason", "coverage", "false_certificate", "uncovered_reachable_m2",
+    keep = ("certified", "stop_reason", "coverage", "coverage_complex", "false_certificate", "uncovered_reachable_m2",
             "false_certificate_where", "robots_used", "euler_bound", "robots_per_bound",
             "sim_time_s", "sim_s_per_robot", "cycles")
     return dict(row, **{k: s.get(k) for k in keep}, wall_s=round(time.monotonic() - t0, 1))

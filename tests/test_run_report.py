@@ -81,6 +81,28 @@ def test_reachable_uncovered_finds_the_hole_a_false_certificate_hides():
     assert s["false_certificate"] is True and s["uncovered_reachable_m2"] > 1.5
 
 
+def test_a_certificate_is_judged_by_its_own_complex_not_by_robots_left_outside_it():
+    """Robots cut off and sent away (or freed as redundant) stand where they stopped and
+    see, but the certificate is about the complex's robots: a complex covering half the
+    room, with the other half's robots alive outside it, is a false certificate (covered
+    by all robots alive, it passed: bench/unseen.py seed 0 map 8, 100% against 54.5%)."""
+    wm = _room()
+    full = _lattice(4.0, 3.0, 0.8)
+    ids = list(range(len(full)))
+    t = Truth(ids=ids, x=full[:, 0].tolist(), y=full[:, 1].tolist(), theta=[0.0] * len(ids),
+              live=[False] * len(ids), t=1.0)
+    inside = [i for i in ids if full[i, 0] < 1.5]
+    cfg = load_config("configs/tiny.toml")
+    s = compute_summary(cfg, wm, t, Complex(occupants=inside),
+                        dict(certified=True, stop_reason="certified"))
+    assert s["coverage"] > 0.99 and s["coverage_complex"] < 0.7
+    assert s["false_certificate"] is True and s["uncovered_reachable_m2"] > 1.5
+    assert s["robots_used"] == len(inside)
+    # the whole lattice in the complex: no false certificate
+    s = compute_summary(cfg, wm, t, Complex(occupants=ids), dict(certified=True))
+    assert s["coverage_complex"] > 0.99 and s["false_certificate"] is False
+
+
 def test_cycles_and_failures_healed_add_up_across_coordinator_restarts():
     st = RunState()
     for c in range(6):   # the first coordinator planned cycles 0..5, then was killed
