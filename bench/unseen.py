@@ -115,6 +115,8 @@ def summarise(rows: list[dict]) -> dict:
                 not_certified=[r["index"] for r in ok if not r["certified"]],
                 false_maps=[r["index"] for r in ok if r["false_certificate"]],
                 min_coverage_certified=min((r["coverage"] for r in cert), default=None),
+                min_coverage_complex=min((r["coverage_complex"] for r in cert
+                                          if r.get("coverage_complex") is not None), default=None),
                 robots_per_bound_mean=(sum(rpb) / len(rpb)) if rpb else None,
                 sim_s_per_robot_mean=(sum(r["sim_s_per_robot"] for r in cert) / len(cert))
                 if cert else None)
@@ -128,7 +130,10 @@ def _line(r: dict) -> str:
     warn = "  FALSE CERTIFICATE at %s" % (r.get("false_certificate_where"),) \
         if r["false_certificate"] else ""
     return (f"{head}  {'certified' if r['certified'] else r['stop_reason']:<12s}"
-            f" coverage {100 * r['coverage']:6.2f}%  robots {r['robots_used']:3d}"
+            f" coverage {100 * r['coverage']:6.2f}%"
+            + (f" (complex {100 * r['coverage_complex']:6.2f}%)" if r.get("coverage_complex")
+               is not None else "")
+            + f"  robots {r['robots_used']:3d}"
             f" / bound {r['euler_bound']}  sim {r['sim_time_s']:7.1f} s"
             f"  wall {r['wall_s']:5.1f} s{warn}")
 
