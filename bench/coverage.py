@@ -242,7 +242,8 @@ def main(argv=None) -> int:
                 print(f"    {line}", flush=True)
     keys = ("name", "seed", "certified", "stop_reason", "robots_used", "euler_bound",
             "robots_per_bound", "sim_s_per_robot", "ideal_count", "ratio", "mean_spacing",
-            "ideal_count_same_spacing", "ratio_same_spacing", "coverage", "false_certificate",
+            "ideal_count_same_spacing", "ratio_same_spacing", "coverage", "coverage_complex",
+            "false_certificate",
             "uncovered_reachable_m2", "cycles", "sim_time_s", "wall_time_s", "mode",
             "move_s", "enter_s", "push_floor_s", "s_per_robot_over_floor", "dropout")
     print(table(results), flush=True)
