@@ -241,8 +241,9 @@ def compute_summary(cfg, wmap, truth: Truth | None, cx: Complex | None, extra: d
     # ground truth of the claim (issue 21): reachable free area that the certified complex's
     # robots do not cover. The claim is about them: robots cut off and sent away, or freed
     # as redundant, stand where they stopped and see, but no certificate counts them. Judged
-    # over every robot alive, bench/unseen.py seed 0 map 8 passed at 100% while the complex
-    # covered 54.5%: robots stranded in the room behind the door it had closed.
+    # over every robot alive, bench/unseen.py seed 0 map 8 (with a sweep rule tried and left
+    # out) passed at 100% while the complex covered 54.5%: robots stranded behind the door
+    # it had closed.
     if certified and members:
         cov_cx, covered, raster = coverage_fraction(
             wmap, np.array([pos[i] for i in members], float).reshape(-1, 2), rv, return_mask=True)
