@@ -38,6 +38,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench.common import eprint  # noqa: E402
+from bench.truth import make_map  # noqa: E402
+from swarmcover.world.maps import write_ros_map  # noqa: E402
 
 CELL = 0.05   # m, the ROS maps' resolution (configs/cave.toml's)
 
@@ -47,24 +49,18 @@ def _pts(a) -> str:
 
 
 def _write_pgm(pm, stem: Path) -> None:
-    """``pm`` (a raster-traced map: rings on a CELL grid) as ``stem``.pgm + .yaml."""
+    """``pm`` (a raster-traced map: rings on a CELL grid) as ``stem``.pgm + .yaml: free
+    where a cell's centre is inside."""
     lo = pm.outer.min(axis=0) - 2 * CELL
     nx, ny = np.round((pm.outer.max(axis=0) + 2 * CELL - lo) / CELL).astype(int)
     xs, ys = lo[0] + (np.arange(nx) + 0.5) * CELL, lo[1] + (np.arange(ny) + 0.5) * CELL
     gx, gy = np.meshgrid(xs, ys)
     free = pm.contains(np.stack([gx.ravel(), gy.ravel()], 1)).reshape(ny, nx)
-    img = np.where(free, 254, 0).astype(np.uint8)[::-1]          # row 0 is the top
-    with open(stem.with_suffix(".pgm"), "wb") as f:
-        f.write(b"P5\n%d %d\n255\n" % (nx, ny))
-        f.write(img.tobytes())
-    stem.with_suffix(".yaml").write_text(
-        f"image: {stem.name}.pgm\nresolution: {CELL}\norigin: [{lo[0]:.4f}, {lo[1]:.4f}, 0.0]\n"
-        "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    write_ros_map(stem, free, CELL, np.round(lo, 4))
 
 
 def write_config(seed: int, index: int, ros: bool, folder: Path):
     """Map ``index`` of campaign ``seed`` as a run config in ``folder``; returns (path, case)."""
-    from bench.truth import make_map
     case = make_map(seed, index, CELL if ros else 0.0)
     name = f"unseen_s{seed}_m{index}" + ("_ros" if ros else "")
     lines = [f'# bench/unseen.py: map {index} of campaign {seed} ({case.kind}'

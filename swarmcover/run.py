@@ -244,12 +244,14 @@ def compute_summary(cfg, wmap, truth: Truth | None, cx: Complex | None, extra: d
     # over every robot alive, bench/unseen.py seed 0 map 8 (with a sweep rule tried and left
     # out) passed at 100% while the complex covered 54.5%: robots stranded behind the door
     # it had closed.
+    out["coverage_complex"] = None
     if certified and members:
-        cov_cx, covered, raster = coverage_fraction(
-            wmap, np.array([pos[i] for i in members], float).reshape(-1, 2), rv, return_mask=True)
+        cov_cx = coverage                   # every robot alive is in it: the same raster
+        if len(members) < len(all_alive):
+            cov_cx, covered, raster = coverage_fraction(
+                wmap, np.array([pos[i] for i in members], float).reshape(-1, 2), rv,
+                return_mask=True)
         out["coverage_complex"] = float(cov_cx)
-    else:
-        out["coverage_complex"] = None
     reach = dict(uncovered_reachable_m2=0.0, where=None)
     if len(wmap.sources):
         for src in wmap.sources:

@@ -453,6 +453,24 @@ def read_ros_yaml(path) -> RosMapMeta:
     return RosMapMeta(path, str(ip), float(res), org, int(neg), float(occ), float(fre), mode)
 
 
+def write_ros_map(stem, free, resolution: float, origin=(0.0, 0.0)) -> None:
+    """Write a ROS map_server map: ``stem``.pgm (254 free, 0 occupied) and ``stem``.yaml.
+    ``free``: bool (ny, nx), row 0 the lowest y (the image stores it top row first);
+    ``origin``: (x, y) of the lower-left pixel's corner (m); ``resolution`` m per cell."""
+    from pathlib import Path
+    stem = Path(stem)
+    free = np.asarray(free, bool)
+    ny, nx = free.shape
+    img = np.where(free, 254, 0).astype(np.uint8)[::-1]
+    with open(stem.with_suffix(".pgm"), "wb") as f:
+        f.write(b"P5\n%d %d\n255\n" % (nx, ny))
+        f.write(img.tobytes())
+    stem.with_suffix(".yaml").write_text(
+        f"image: {stem.name}.pgm\nresolution: {resolution}\n"
+        f"origin: [{float(origin[0])!r}, {float(origin[1])!r}, 0.0]\n"
+        "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
+
+
 def ros_free_mask(meta: RosMapMeta) -> np.ndarray:
     """Free cells of the image, bool (H, W), image row 0 at the top (as stored)."""
     from PIL import Image, UnidentifiedImageError

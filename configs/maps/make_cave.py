@@ -3,6 +3,7 @@ wide, a few rocks. Usage: python make_cave.py SEED OUT_STEM  (writes OUT_STEM.pg
 import sys
 import numpy as np
 from scipy import ndimage
+from swarmcover.world.maps import write_ros_map
 seed = int(sys.argv[1]); out = sys.argv[2]
 rng = np.random.default_rng(seed)
 res, W, H = 0.05, 12.0, 9.0
@@ -39,9 +40,5 @@ free[:4, :] = free[-4:, :] = False
 free[:, :4] = free[:, -4:] = False
 lab, _ = ndimage.label(free)
 free = lab == lab[int(1.8 / res), int(1.8 / res)]
-img = np.where(free, 254, 0).astype(np.uint8)[::-1]
-with open(out + ".pgm", "wb") as f:
-    f.write(b"P5\n%d %d\n255\n" % (nx, ny)); f.write(img.tobytes())
-name = out.split("/")[-1]
-open(out + ".yaml", "w").write(f"image: {name}.pgm\nresolution: {res}\norigin: [0.0, 0.0, 0.0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
+write_ros_map(out, free, res)
 print("free area m2", round(free.sum() * res * res, 1))
