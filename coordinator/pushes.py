@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import logging
 
-from swarmcover.bus.messages import Status, Task, parse_sweep_reason
+from swarmcover.bus.messages import Status, Task, parse_sweep_reason, sweep_stoppers
 
 from .actions import Outbox
 from .config import CoordinatorConfig, PushMode
@@ -229,6 +229,9 @@ class Pushes:
                 static_ok = task is not None and len(task.landmarks) >= 2
                 if ahead_done or (not sequential and ahead_started and static_ok):
                     if task is None:
+                        log.warning("cycle %d: robot %d to vertex %d: no landmark of it in "
+                                    "place: booked there without moving", self.cycle,
+                                    mv.robot, path[t + 1])
                         task = Task(kind="hold", vertex=path[t + 1])
                     self.start(mv, task, now)
                 else:
@@ -269,7 +272,24 @@ class Pushes:
         mover = job.step(N.MOVE, t + 1) if arrived and t + 2 < len(path) else None
         holder = self.placement.holders(self.roster)
         return self.tasks.move(path, t, self._in_motion(holder),
-                               None if mover is None else mover.robot, holder=holder)
+                               None if mover is None else mover.robot, holder=holder,
+                               beyond=self._beyond(job) if t + 2 == len(path) else None)
+
+    def _beyond(self, job: PushJob) -> tuple[int, float] | None:
+        """(robot, its bearing from f in f's frame, rad) of the robot the push's test drive
+        placed straight out from f (a clear drive or one kept at a wall, not a probe's or a
+        sweep's): a landmark of f for the robot that refills it, at the drive's direction.
+        None otherwise. Without it, f's only neighbour being the mover's own vertex left
+        the mover no landmark at all: it was booked at f without moving (bench/unseen.py
+        seed 0 map 8: a vertex in a 0.30 m door, its new robot beyond the door then cut off
+        from every source, sent away, and a false certificate over the door)."""
+        spec, dep = job.spec, job.step(N.DEPLOY)
+        td = job.step(N.TEST_DRIVE)
+        if (td is None or dep is None or dep.state != S.DONE or spec.via_frac > 0
+                or spec.sweep_far > 0 or not self.roster.live(td.robot)
+                or dep.reason not in ("wall", "placed by the test drive")):
+            return None
+        return td.robot, float(spec.direction)
 
     def _in_motion(self, holder: dict[int, int]) -> set[int]:
         """Vertices whose robot is not a landmark now (``holder``: vertex -> robot): a
@@ -467,7 +487,8 @@ class Pushes:
             snap, self.params, movers=movers,
             skip={j.spec.path[-1] for j in self.jobs if j.spec.free},
             test_drive_failures=drive_failures(self.evidence, snap), new_vertex=pl.next_vertex,
-            max_n=room, evidence=evidence_kwargs(self.evidence, snap),
+            max_n=room,
+            evidence=evidence_kwargs(self.evidence, snap, self.placement.cut_off),
             returned=self.evidence.returned_probes(snap.occupant))
         for spec in specs:
             pl.next_vertex += 1
@@ -492,7 +513,8 @@ class Pushes:
             # vertex (a door jamb felt "above" is ahead and to the side): on_status keeps it
             # in td_contacts, never as a wall the robot at the vertex rests against. A wall
             # sweep ("swept HI LO") also books the part of the edge it joined
-            self._record(spec, touched=True, contact_offset=td.touch_offset, swept=swept)
+            self._record(spec, touched=True, contact_offset=td.touch_offset, swept=swept,
+                         by=sweep_stoppers(td.reason))
             log.info("cycle %d: test drive from vertex %d touched an obstacle (%s): fence "
                      "side of %s", self.cycle, spec.path[-1], td.reason, spec.frontier_edge)
             if "(return" not in td.reason and self._retry(job):
@@ -500,17 +522,18 @@ class Pushes:
         job.cancel("test drive touched an obstacle")
 
     def _record(self, spec, touched: bool, contact_offset: float = 0.0,
-                swept: tuple[float, float] | None = None, placed: int | None = None) -> None:
+                swept: tuple[float, float] | None = None, placed: int | None = None,
+                by: tuple[int, ...] = ()) -> None:
         """Book a drive's outcome (coordinator.topology.evidence): the direction actually
         driven, for a touch the agent's touch_offset (sector centre - direction), for a
-        wall sweep the (hi, lo) it joined."""
+        wall sweep the (hi, lo) it joined and the robots seen where a touch stopped it."""
         dep = spec.deployment
         if dep is None:
             if touched:
                 self.evidence.add_failed_direction(spec.path[-1], float(spec.direction))
             return
         self.evidence.record(dep, touched, direction=float(spec.direction),
-                             contact_offset=contact_offset, swept=swept, placed=placed)
+                             contact_offset=contact_offset, swept=swept, placed=placed, by=by)
 
     def _retry(self, job: PushJob) -> bool:
         """Re-plan a push whose test drive touched, within this cycle (spec 3.4(iv): the
@@ -537,7 +560,7 @@ class Pushes:
             test_drive_failures=drive_failures(self.evidence, snap),
             new_vertex=pl.next_vertex, scale_correct=job.spec.scale_correct,
             test_drive=True, lattice_spacing=self.cfg.d0 if self.cfg.lattice else None,
-            evidence=evidence_kwargs(self.evidence, snap),
+            evidence=evidence_kwargs(self.evidence, snap, self.placement.cut_off),
             skip_probes=(self.evidence.returned_probes(snap.occupant) if job.spec.free
                          else frozenset()),
             sweeps_last=self.cfg.sweeps_last and not job.spec.free)

@@ -232,14 +232,16 @@ class TaskBuilder:
         return self.goto(v, lm, br)
 
     def move(self, path: list[int], t: int, moving: set[int], ahead: int | None,
-             holder: dict[int, int] | None = None) -> Task | None:
+             holder: dict[int, int] | None = None,
+             beyond: tuple[int, float] | None = None) -> Task | None:
         """Task for the robot moving p_t -> p_{t+1} (t = -1: the new robot entering p0).
 
         Landmarks: the robots holding the target's neighbour vertices, but for the
         ``moving`` ones (``holder``: vertex -> the robot there now; None: the snapshot's
         occupants); plus ``ahead``, the robot now at p_{t+2} once it has arrived
-        (sequential fallback). The bearings are the target's recorded ones. Returns None
-        when no landmark at all is available (the mover then just holds).
+        (sequential fallback). The bearings are the target's recorded ones; ``beyond`` (the
+        robot a test drive placed out from the target, its bearing from there) joins them
+        when fewer than two are left. Returns None when no landmark at all is available.
         """
         target = path[t + 1]
         lm, br = self.vertex_landmarks(target, moving, holder)
@@ -248,6 +250,9 @@ class TaskBuilder:
             if b is not None:
                 lm.append(ahead)
                 br.append(b)
+        if beyond is not None and len(lm) < 2 and beyond[0] not in lm:
+            lm.append(beyond[0])
+            br.append(beyond[1])
         if not lm:
             return None
         task = self.goto(target, lm, br)

@@ -386,7 +386,7 @@ class _Tasks:
         from swarmcover.bus.messages import Task
         return Task(kind="deploy", vertex=spec.new_vertex)
 
-    def move(self, path, t, moving, ahead, holder=None):
+    def move(self, path, t, moving, ahead, holder=None, beyond=None):
         from swarmcover.bus.messages import Task
         return Task(kind="goto", vertex=path[t + 1], landmarks=[1, 2], bearings=[0.0, 1.0])
 
