@@ -559,14 +559,28 @@ class Status(Message):
 TASK_KINDS = ("hold", "goto", "deploy", "test_drive", "leave")
 
 
-def sweep_reason(hi: float, lo: float) -> str:
+def sweep_reason(hi: float, lo: float, by=()) -> str:
     """Status.reason of a wall sweep that found no opening: "swept HI LO", the fractions of
     the edge (from the robot's vertex towards the other end) between which its body slid
     along the wall, going round no wall's end; LO "end" when it crossed the ray at its vertex
-    (Task.sweep_stop). The task fails with it once the robot is back at its vertex (with
-    " (return: why)" after it when it could not get back)."""
+    (Task.sweep_stop); then "by ID,ID" when a touch with robots seen in its sector stopped
+    it (``by``: those robots' ids; a wall there may be one of them). The task fails with it
+    once the robot is back at its vertex (with " (return: why)" after it when it could not
+    get back)."""
     low = "end" if lo == -math.inf else f"{lo:.3f}"
-    return f"swept {hi:.3f} {low}"
+    ids = sorted({int(i) for i in by})
+    return f"swept {hi:.3f} {low}" + (" by " + ",".join(map(str, ids)) if ids else "")
+
+
+def sweep_stoppers(reason: str) -> tuple[int, ...]:
+    """The robot ids after "by" in a :func:`sweep_reason` (() when none, or not one)."""
+    parts = reason.split()
+    if len(parts) < 5 or parts[0] != "swept" or parts[3] != "by":
+        return ()
+    try:
+        return tuple(int(x) for x in parts[4].split(",") if x)
+    except ValueError:
+        return ()
 
 
 def parse_sweep_reason(reason: str) -> tuple[float, float] | None:

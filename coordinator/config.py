@@ -74,6 +74,8 @@ class CoordinatorConfig:
                                    # its vertex's landmarks once its push is over
     settle_s: float = 0.6          # wait after a cycle's last task before re-planning (sim s)
     dead_after_cycles: int = 3     # heartbeat: robot with no status for this many cycles is dead
+    stray_cycles: int = 3          # robots cut off from every source stay members this many
+                                   # plans (a refilled hole links them again), then are sent away
     dead_grace_s: float = 3.0      # a robot whose liveliness token stays gone this long (sim s)
                                    # is dead; shorter gaps (router restart) are forgiven
     door_min_rv: float = 0.4       # a fence side that its ends' drives or contacts would close
@@ -204,6 +206,7 @@ _BOUNDS = {
     "spawn_timeout_s": (0.0, 1e9, True),
     "settle_s": (0.0, 1e6),
     "dead_after_cycles": (1, 10**9),
+    "stray_cycles": (1, 10**9),
     "dead_grace_s": (0.0, 1e6),
     "max_cycles": (1, 10**12),
     "door_min_rv": (0.0, 2.0, True),

@@ -113,6 +113,7 @@ class Deployer:
         self.final_pass = False
         self.uncertified_idle = 0
         self.no_push = 0                             # consecutive plans without a push
+        self.stray_plans: dict[int, int] = {}        # robot -> plans in a row it was cut off
         self.pending_holds: dict[int, int] = {}      # new robot -> source vertex to hold
         self.started = False
 
@@ -286,10 +287,20 @@ class Deployer:
         out = self._out_vertices()
         snap = self._take_snapshot()
         strays = self._strays(snap)
+        # cut off for stray_cycles plans in a row: a failed or stalled move that cut the
+        # graph is a hole the next pushes refill, which links them again. Sent away at once,
+        # the robots beyond a door stood in the free space the complex no longer held
+        # (bench/unseen.py seed 0 map 8: one stalled move at the door cut 14 robots off)
+        now_stray = {snap.occupant[v] for v in strays}
+        self.stray_plans = {r: self.stray_plans.get(r, 0) + 1 for r in now_stray}
+        strays = {v for v in strays if self.stray_plans[snap.occupant[v]] >= self.cfg.stray_cycles}
+        waiting = len(now_stray) - len(strays)        # cut off, still members
         if strays:
             for v in sorted(strays):
                 rid = snap.occupant[v]
+                self.stray_plans.pop(rid, None)
                 self.left.add(rid)
+                self.placement.cut_off.add(rid)
                 self.out.send(rid, Task(kind="leave", vertex=-1,
                                         timeout_s=self.cfg.task_timeout_s))
             log.warning("cycle %d: robots %s are cut off from every source: sent away",
@@ -306,15 +317,17 @@ class Deployer:
                            and self.cycle % self.cfg.scale_correct_period == 0),
             test_drive=self.cfg.test_drive, next_vertex=self.next_vertex,
             lattice_spacing=self.cfg.d0 if self.cfg.lattice else None,
-            evidence=evidence_kwargs(self.evidence, snap), free_probes=self.cfg.free_probes,
+            evidence=evidence_kwargs(self.evidence, snap, self.placement.cut_off),
+            free_probes=self.cfg.free_probes,
             returned_probes=self.evidence.returned_probes(snap.occupant),
             sweeps_last=self.cfg.sweeps_last, out=frozenset(out),
             sweeps_free=self.cfg.sweeps_free, free_max=self.cfg.free_max)
         self.next_vertex += len(plan.jobs)
         self.redundant = set(plan.redundant)
-        if carried:
-            # nothing is certified while a probe is out: the snapshot holds its vertex's
-            # edges as they were when it left
+        if carried or waiting:
+            # nothing is certified while a probe is out (the snapshot holds its vertex's
+            # edges as they were when it left), nor while robots cut off from every source
+            # are still members (linked again or sent away within stray_cycles plans)
             plan.certified = False
         self.out.add(PublishComplex(self._complex_msg(plan, now, "running")))
         if self._pending_failures and plan.certified:

@@ -13,7 +13,7 @@ from enum import StrEnum
 
 from swarmcover.ground.angles import wrap
 
-from .planner import JobSpec, Snapshot
+from .planner import JobSpec, Snapshot, source_component
 from .topology.evidence import Evidence
 
 
@@ -157,12 +157,21 @@ def beyond_side(snap: Snapshot):
     return beyond
 
 
-def evidence_kwargs(evidence: Evidence, snap: Snapshot) -> dict:
+def evidence_kwargs(evidence: Evidence, snap: Snapshot, cut_off=frozenset()) -> dict:
     """What the planner takes of the evidence on ``snap``: the fence's keyword arguments
     (less the failed directions, passed as ``test_drive_failures``); a drive that found
-    room counts only while its robot's vertex stands beyond the side (:func:`beyond_side`)."""
+    room counts only while its robot's vertex stands beyond the side (:func:`beyond_side`).
+    ``sweep_foreign``: the sides a sweep of which a robot cut off from the swarm stopped,
+    one sent away as such (``cut_off``: robot ids) or one of ``snap`` no source reaches."""
     kw = evidence.fence_kwargs(snap.occupant, beyond_side(snap))
     kw.pop("test_drive_failures")
+    # a sweep stopped by a robot cut off from the swarm: it stands in free space the complex
+    # does not hold, and no inference may close the gap it left (fence_probes: 'sweep_gap').
+    # A robot sent away as redundant stands where the certified complex held it
+    linked = source_component(snap)
+    outside = set(cut_off) | {r for v, r in snap.occupant.items() if v not in linked}
+    kw["sweep_foreign"] = frozenset(k for k, by in evidence.sweep_stoppers(snap.occupant).items()
+                                    if by & outside)
     return kw
 
 

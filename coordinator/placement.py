@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from swarmcover.ground.angles import wrap
 
-from .planner import Snapshot, reachable
+from .planner import Snapshot, source_component
 from .roster import Roster
 
 SETTLED_STATES = ("holding", "idle")
@@ -31,6 +31,7 @@ class Placement:
         self.td_contacts: dict[int, list[float]] = {}  # vertex -> contacts of failed drives
         self.redundant: set[int] = set()             # vertices
         self.left: set[int] = set()                  # robots sent away (redundant, idle)
+        self.cut_off: set[int] = set()               # of those, sent away as cut off
 
     def new_vertex(self) -> int:
         v = self.next_vertex
@@ -122,9 +123,6 @@ def stray_vertices(snap: Snapshot, n_sources: int) -> set[int]:
     """Vertices in components of the (mutual-visibility) graph that hold no source: robots
     that lost the swarm (a failed move, a failure that cut the graph). No path can reach
     them, so their frontier could never close; they are sent away instead."""
-    present = [k for k in range(n_sources) if k in snap.occupant]
-    if not present:
+    if not any(k in snap.occupant for k in range(n_sources)):
         return set()
-    nbrs = snap.nbrs
-    seen = reachable(present, lambda v: (u for u in nbrs.get(v, {}) if v in nbrs.get(u, {})))
-    return set(snap.occupant) - seen
+    return set(snap.occupant) - source_component(snap, n_sources)

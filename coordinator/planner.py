@@ -335,6 +335,16 @@ def reachable(starts, neighbours, blocked=frozenset()) -> set[int]:
     return seen
 
 
+def source_component(snap: Snapshot, n_sources: int | None = None) -> set[int]:
+    """The vertices of ``snap`` linked to a source vertex by mutual sightings (sources: the
+    vertices 0 .. n_sources - 1 present; None: ``snap.sources``)."""
+    starts = (snap.sources if n_sources is None
+              else [k for k in range(n_sources) if k in snap.occupant])
+    nbrs = snap.nbrs
+    return reachable([k for k in starts if k in snap.occupant],
+                     lambda v: (u for u in nbrs.get(v, {}) if v in nbrs.get(u, {})))
+
+
 def carryable(edges, sources, targets, probers) -> set[int]:
     """Which probers (vertices whose robots are out on free probes) may stay out into the
     next cycle (``[coordinator] free_probes_carry``), in order, greedily: while one is

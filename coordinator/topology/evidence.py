@@ -242,12 +242,13 @@ class Evidence:
         # probe key (fraction 0 or 1: the end) -> sweeps driven from that end
         self._swept: dict[SideKey, list[tuple[float, float]]] = {}
         self._sweep_tries: dict[ProbeKey, int] = {}
+        self._sweep_by: dict[SideKey, set[int]] = {}   # side -> robot ids that stopped sweeps
 
     # ---------------------------------------------------------------- recording
     def record(self, dep, touched: bool, *, direction: float | None = None,
                returned: bool = False, contact_offset: float = 0.0,
                swept: tuple[float, float] | None = None,
-               placed: int | None = None) -> DriveRecord:
+               placed: int | None = None, by=()) -> DriveRecord:
         """Record the outcome of driving ``dep`` (a coordinator.topology.fence.Deployment, or anything
         with its fields). ``direction`` overrides dep.bearing (the direction actually driven,
         e.g. after lattice placement). ``touched``: the drive failed with a touch before it
@@ -262,7 +263,9 @@ class Evidence:
         ``swept``: a wall sweep's (hi, lo) (fractions from its vertex, lo -inf for its
         end's ray; :func:`sweep_interval`) when it touched and swept; a sweep that found
         room or an opening is a clear drive (``touched`` False, its robot stays).
-        ``placed``: for a clear drive, the vertex its robot stays at as a new robot."""
+        ``placed``: for a clear drive, the vertex its robot stays at as a new robot.
+        ``by``: a wall sweep's stoppers, the robot ids seen where a touch stopped it
+        (:meth:`sweep_stoppers`)."""
         d = float(dep.bearing if direction is None else direction)
         frac = float(getattr(dep, "via_frac", 0.0) or 0.0)
         edge = tuple(int(x) for x in dep.edge) if dep.edge is not None else None
@@ -273,6 +276,8 @@ class Evidence:
         self.records.append(rec)
         if float(getattr(dep, "sweep_far", 0.0) or 0.0) > 0.0 and edge is not None:
             self._record_sweep(rec, returned, placed)
+            if touched and by:
+                self._sweep_by.setdefault((*edge, rec.sigma), set()).update(int(r) for r in by)
             return rec
         interior = rec.kind == "probe" and edge is not None and frac > 1e-9
         if touched:
@@ -402,6 +407,13 @@ class Evidence:
         """(u, v, sigma, end fraction 0 or 1) -> sweeps driven from that end (whatever they
         found): detect_fence's ``sweep_tries``."""
         return {k: n for k, n in self._sweep_tries.items()
+                if present is None or (k[0] in present and k[1] in present)}
+
+    def sweep_stoppers(self, present: Container[int] | None = None
+                       ) -> dict[SideKey, frozenset[int]]:
+        """side (u, v, sigma) -> the robots (ids, not nodes) seen where a touch stopped one
+        of its wall sweeps (a wall there may have been one of them)."""
+        return {k: frozenset(r) for k, r in self._sweep_by.items()
                 if present is None or (k[0] in present and k[1] in present)}
 
     def fence_kwargs(self, present: Container[int] | None = None,

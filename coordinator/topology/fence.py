@@ -106,6 +106,7 @@ def detect_fence(
     tilt_failures=(),
     sweeps=None,
     sweep_tries=None,
+    sweep_foreign=(),
 ) -> Fence:
     """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
 
@@ -180,6 +181,8 @@ def detect_fence(
       joined, in fractions from u, the ray at u -inf and the ray at v +inf
       (evidence.sweep_interval).
     sweep_tries: (u, v, sigma, 0.0 or 1.0: the end u or v) -> sweeps driven from that end.
+    sweep_foreign: sides (u, v, sigma) a sweep of which a robot outside the complex's
+      sources' part stopped: their gaps are never closed as the inference 'sweep_gap'.
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
       e.g. edges reclassified after a failed test drive in an earlier cycle.
     default_bearing: first deployment direction (rad, body frame) of a robot with no
@@ -198,7 +201,7 @@ def detect_fence(
     ends = test_drive_rule(cx, open_sides, room, ends)
     marks = corner_wait_marks(corner_wait, marks, room)
     ev = probe_evidence(probe_failures, probe_fracs, probe_unreachable, probe_clear,
-                        probe_offsets, tilt_failures, sweeps, sweep_tries)
+                        probe_offsets, tilt_failures, sweeps, sweep_tries, sweep_foreign)
     if P.corner_probes:
         marks, ends = corner_candidates(marks, ends, open_sides)
     probing, marks = plan_probes(cx, L, P, room, ev, ends, marks, open_sides)
