@@ -18,7 +18,7 @@ from hypothesis import given, settings, strategies as st
 from swarmcover.agents.behaviours import Behaviour
 from swarmcover.agents.params import AgentParams
 from swarmcover.agents.sweep import SweepGeom, locate
-from swarmcover.bus.messages import Sense, Task, parse_sweep_reason
+from swarmcover.bus.messages import Sense, Task, parse_sweep_reason, sweep_stoppers
 from swarmcover.ground.angles import wrap
 from swarmcover.coordinator.topology.targets import star_shape
 from swarmcover.world.maps import WorldMap
@@ -271,11 +271,13 @@ def test_a_door_narrower_than_the_body_is_swept_past():
 
 def test_a_robot_in_the_way_stops_the_sweep_short():
     """Robot 9 rests against the wall at x = 0.45: the sweep stops short of it (it never
-    pushes a robot), goes back, and reports how far it got."""
+    pushes a robot), goes back, and reports how far it got and that robot 9 stopped it (the
+    coordinator infers nothing over the gap when robot 9 is cut off from the swarm)."""
     wm, pts, rot = _scene(None, 0.0, {9: (0.45, R + 0.002)})
     beh, trace, _ = _run(wm, pts, _task(pts, rot, far=0.9))
     hi, lo = parse_sweep_reason(beh.reason)
     assert lo == -math.inf and hi < 0.45 / D0
+    assert 9 in sweep_stoppers(beh.reason)
     assert _local(trace, rot)[:, 0].max() < 0.45 - 2 * R + 0.01
 
 

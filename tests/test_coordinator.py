@@ -673,3 +673,63 @@ def test_corridor_doors_seed_1_never_certifies_a_room_it_did_not_cover():
     res = sim.run(max_sim_s=20000, max_wall_s=500)
     assert res.certified, res.stop_reason
     assert _coverage(sim, res) >= 0.995
+
+
+def test_robots_cut_off_stay_members_for_stray_cycles_plans_then_are_sent_away():
+    """A stalled move at a door cut 14 robots off from the source (bench/unseen.py seed 0
+    map 8); sent away at once, they stood in the room the complex no longer held. Cut-off
+    robots stay members for ``stray_cycles`` plans in a row (the hole that cut them off is
+    refilled meanwhile), nothing is certified while they wait, and only then are they sent
+    away, booked as cut off (fence sides their bodies stopped sweeps at never close by
+    inference: tests/test_sweep.py). A robot linked again starts its count afresh."""
+    from test_free_probes import _deployer
+    from swarmcover.coordinator.planner import Snapshot
+    s = 0.9
+    P = [(0.0, 0.0), (s, 0.0), (s / 2, s * math.sqrt(3) / 2), (5.0, 5.0)]
+    nbrs = {i: {j: math.atan2(q[1] - p[1], q[0] - p[0]) for j, q in enumerate(P)
+                if j != i and math.dist(p, q) <= 1.0} for i, p in enumerate(P)}
+    snap = Snapshot(occupant={0: 10, 1: 11, 2: 12, 3: 42}, nbrs=nbrs, sources=[0])
+    dep, _ = _deployer(snap, CoordinatorConfig(stray_cycles=3))
+    dep.phase_t = 0.0
+
+    def leaves():
+        return [a.robot for a in dep.out.actions
+                if getattr(a, "task", None) is not None and a.task.kind == "leave"]
+    for k in range(1, 3):
+        dep.out.actions = []
+        dep._plan(float(k))
+        assert leaves() == [] and 42 in dep.snapshot.occupant.values()
+        assert dep.stray_plans == {42: k} and not dep.plan.certified
+    dep.out.actions = []
+    dep._plan(3.0)
+    assert leaves() == [42] and dep.placement.cut_off == {42} and 42 in dep.left
+    assert 42 not in dep.snapshot.occupant.values() and dep.stray_plans == {}
+
+
+def test_the_robot_refilling_a_door_vertex_homes_on_the_robot_placed_beyond_it():
+    """bench/unseen.py seed 0 map 8: vertex 2 stood in a door, seen only from vertex 1. Its
+    robot drove clear through the door (the new vertex); the robot moving 1 -> 2 had no
+    landmark of vertex 2 left (its own vertex is the only neighbour) and was booked at 2
+    without moving, and the robot beyond the door was cut off. The robot the test drive
+    placed straight out from f is f's landmark at the drive's direction."""
+    from test_free_probes import _deployer
+    from swarmcover.coordinator.planner import Snapshot
+    from swarmcover.coordinator.tasks import TaskBuilder
+    nbrs = {0: {1: 0.0}, 1: {0: math.pi, 2: 0.3}, 2: {1: 0.3 - math.pi}}
+    snap = Snapshot(occupant={0: 10, 1: 11, 2: 12}, nbrs=nbrs, sources=[0])
+    dep, _ = _deployer(snap)
+    tb = TaskBuilder(dep.cfg, dep.params, dep.roster, snap)
+    assert tb.move([1, 2], 0, {1, 2}, None) is None
+    task = tb.move([1, 2], 0, {1, 2}, None, beyond=(12, -0.1))
+    assert task.kind == "goto" and task.vertex == 2
+    assert task.landmarks == [12] and task.bearings == [pytest.approx(-0.1)]
+    # one landmark of its own fixes a ray, not a point: the robot beyond joins it; with two
+    # the target needs none
+    nbrs2 = {0: {1: 0.0, 2: 0.5, 3: 1.0}, 1: {0: math.pi, 2: 0.3},
+             2: {1: 0.3 - math.pi, 0: 0.5 - math.pi, 3: 2.0}, 3: {0: 1.0 - math.pi, 2: -1.0}}
+    for occ, want in (({0: 10, 1: 11, 2: 12}, [10, 13]), ({0: 10, 1: 11, 2: 12, 3: 14}, [10, 14])):
+        dep2, _ = _deployer(Snapshot(occupant=occ, nbrs={v: {u: b for u, b in nbrs2[v].items()
+                                                          if u in occ} for v in occ},
+                                     sources=[0]))
+        tb2 = TaskBuilder(dep2.cfg, dep2.params, dep2.roster, dep2.snapshot)
+        assert tb2.move([1, 2], 0, {1}, None, beyond=(13, -0.1)).landmarks == want

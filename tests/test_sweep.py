@@ -119,6 +119,61 @@ def test_a_sweep_stopped_short_is_tried_again_farther_then_closes_only_as_inferr
     assert (e, "sweep_gap") in [(int(k), w) for k, w in f.inferred]
 
 
+def _gap_left(by=()):
+    """test_a_sweep_stopped_short's evidence: both ends' tries used up, (0.3, 0.4) left;
+    robots ``by`` seen where a touch stopped u's sweeps."""
+    cx, ev = _candidate()
+    a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
+    ev.record(b, touched=True, swept=(0.55, -INF))
+    ev.record(a, touched=True, swept=(0.2, -INF), by=by)
+    a2, _ = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
+    ev.record(a2, touched=True, swept=(0.3, -INF), by=by)
+    (b3,) = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
+    ev.record(b3, touched=True, swept=(0.6, -INF))
+    return cx, ev
+
+
+def _tri_snap(cut=False):
+    """Robots 0, 1, 2 on TRI's vertices (vertex v held by robot v, source 0) and robot 42
+    at vertex 3 beyond the side: linked to them, or (``cut``) seen by none of them."""
+    P = np.vstack([TRI, [[S / 2, -0.5]]])
+    nbrs = {i: _nbrs(P, i) for i in range(4)}
+    if cut:
+        nbrs[3] = {}
+        for i in range(3):
+            nbrs[i].pop(3, None)
+    return Snapshot(occupant={0: 0, 1: 1, 2: 2, 3: 42}, nbrs=nbrs, sources=[0])
+
+
+@pytest.mark.parametrize("case, infers", [("member", True), ("cut_off", False),
+                                          ("sent_away_cut_off", False),
+                                          ("sent_away_redundant", True)])
+def test_no_inference_closes_a_gap_a_cut_off_robot_stopped_the_sweeps_at(case, infers):
+    """bench/unseen.py seed 0 maps 8 and 18: a robot cut off from the swarm stood in or
+    beyond a 0.30 rv door, stopped the sweeps from both jambs, and the side closed as
+    'sweep_gap' over the door (the complex covered 54%). A sweep stopped by a robot cut off
+    (no source reaches its vertex, or sent away as such) leaves its side frontier with
+    nothing to drive: the run ends uncertified unless that robot links again. A robot of
+    the swarm, or one sent away as redundant (it stands where the certified complex held
+    it), is what it was: 'sweep_gap', an inference reported with the certificate."""
+    from swarmcover.coordinator.jobs import evidence_kwargs
+    cx, ev = _gap_left(by=(42,))
+    snap = _tri_snap(cut=(case == "cut_off"))
+    cut_off = {42} if case == "sent_away_cut_off" else set()
+    if case.startswith("sent_away"):
+        snap = Snapshot(occupant={0: 0, 1: 1, 2: 2}, nbrs={i: _nbrs(TRI, i) for i in range(3)},
+                        sources=[0])
+    f = detect_fence(cx, test_drive_failures=ev.failed_directions(),
+                     **evidence_kwargs(ev, snap, cut_off))
+    e, side = _side(f, cx)
+    assert not _sweeps(f)
+    if infers:
+        assert side.reason == "sweep_gap" and e in f.obstacle.tolist()
+    else:
+        assert side.kind == "frontier" and e not in f.obstacle.tolist()
+        assert e not in [int(k) for k, _ in f.inferred]
+
+
 def test_a_sweep_that_found_room_is_no_evidence():
     """A sweep whose robot stayed at an opening (or where its wall receded) is a clear
     drive: that end is never offered again, and the side, still one-sided, closes only as
