@@ -285,6 +285,13 @@ class Deployer:
     def _plan(self, now: float) -> None:
         carried = [j for j in self.jobs if not j.finished]
         out = self._out_vertices()
+        for rid, v in self.placement.rejoin(self.roster, self.sources):
+            # a robot cut off stands in free space the complex did not hold: seen again,
+            # it is a vertex of it again (and the sides it stopped sweeps at are no longer
+            # kept from closing, tests/test_sweep.py)
+            log.info("cycle %d: robot %d, cut off, is linked again: it holds vertex %d",
+                     self.cycle, rid, v)
+            self.out.send(rid, Task(kind="hold", vertex=v, timeout_s=self.cfg.task_timeout_s))
         snap = self._take_snapshot()
         strays = self._strays(snap)
         # cut off for stray_cycles plans in a row: a failed or stalled move that cut the

@@ -72,6 +72,29 @@ class Placement:
             out.append(rid)
         return sorted(out)
 
+    def rejoin(self, roster: Roster, sources: list[float]) -> list[tuple[int, int]]:
+        """Robots sent away as cut off that a robot linked to a source sees again, and that
+        see it (their Status, both ways): each holds a new vertex again, where it stands.
+        Returns (robot, vertex) pairs; the caller tells each to hold it."""
+        if not self.cut_off:
+            return []
+        snap = self.snapshot(roster, sources)
+        linked = {snap.occupant[v] for v in source_component(snap)}
+        out = []
+        for rid in sorted(self.cut_off):
+            r = roster.get(rid)
+            if r is None or r.dead or not r.alive or r.status is None:
+                continue
+            sees = set(r.status.nbr_ids) & linked
+            if any(rid in roster.get(m).status.nbr_ids for m in sees):
+                self.cut_off.discard(rid)
+                self.left.discard(rid)
+                self.vertex_of[rid] = v = self.next_vertex
+                self.next_vertex += 1
+                linked.add(rid)
+                out.append((rid, v))
+        return out
+
     def all_settled(self, roster: Roster, skip=()) -> bool:
         """Every member's agent (but those in ``skip``) reports no running task and a
         settled state."""

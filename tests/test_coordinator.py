@@ -704,6 +704,22 @@ def test_robots_cut_off_stay_members_for_stray_cycles_plans_then_are_sent_away()
     dep._plan(3.0)
     assert leaves() == [42] and dep.placement.cut_off == {42} and 42 in dep.left
     assert 42 not in dep.snapshot.occupant.values() and dep.stray_plans == {}
+    # a robot of the swarm comes into its sight, and it into that robot's: it links again,
+    # holding a vertex of its own where it stands
+    from swarmcover.bus.messages import Status
+    import dataclasses
+    r12, r42 = dep.robots[12], dep.robots[42]
+    r12.status = dataclasses.replace(r12.status, nbr_ids=[*r12.status.nbr_ids, 42],
+                                     nbr_bearings=[*r12.status.nbr_bearings, 1.0])
+    r42.status = Status(robot=42, seq=99, t=4.0, state="idle", vertex=-1, nbr_ids=[12],
+                        nbr_bearings=[-2.0])
+    dep.out.actions = []
+    dep._plan(4.0)
+    holds = [(a.robot, a.task.vertex) for a in dep.out.actions
+             if getattr(a, "task", None) is not None and a.task.kind == "hold"]
+    assert [r for r, _ in holds] == [42] and holds[0][1] not in (0, 1, 2, 3)
+    assert not dep.placement.cut_off and 42 not in dep.left
+    assert dep.snapshot.occupant[holds[0][1]] == 42 and not dep.stray_plans
 
 
 def test_the_robot_refilling_a_door_vertex_homes_on_the_robot_placed_beyond_it():

@@ -151,9 +151,10 @@ def _tri_snap(cut=False):
 def test_no_inference_closes_a_gap_a_cut_off_robot_stopped_the_sweeps_at(case, infers):
     """bench/unseen.py seed 0 maps 8 and 18: a robot cut off from the swarm stood in or
     beyond a 0.30 rv door, stopped the sweeps from both jambs, and the side closed as
-    'sweep_gap' over the door (the complex covered 54%). A sweep stopped by a robot cut off
-    (no source reaches its vertex, or sent away as such) leaves its side frontier with
-    nothing to drive: the run ends uncertified unless that robot links again. A robot of
+    'sweep_gap' over the door (the complex covered 54%). Once the sweeps of a side are over
+    and a robot cut off (no source reaches its vertex, or sent away as such) stopped one,
+    the side is probed by the probe rule instead (a probe finding room in the door stays,
+    and the robot beyond links again, coordinator.placement.Placement.rejoin). A robot of
     the swarm, or one sent away as redundant (it stands where the certified complex held
     it), is what it was: 'sweep_gap', an inference reported with the certificate."""
     from swarmcover.coordinator.jobs import evidence_kwargs
@@ -170,8 +171,12 @@ def test_no_inference_closes_a_gap_a_cut_off_robot_stopped_the_sweeps_at(case, i
     if infers:
         assert side.reason == "sweep_gap" and e in f.obstacle.tolist()
     else:
+        # the probe rule instead: perpendicular probes at every interior fraction
         assert side.kind == "frontier" and e not in f.obstacle.tolist()
         assert e not in [int(k) for k, _ in f.inferred]
+        probes = [d for lst in f.deployments.values() for d in lst
+                  if d.kind == "probe" and d.edge == (0, 1)]
+        assert probes and all(0.0 < d.via_frac < 1.0 for d in probes)
 
 
 def test_a_sweep_that_found_room_is_no_evidence():
