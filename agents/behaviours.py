@@ -241,6 +241,7 @@ class Behaviour:
             self.changed = True
 
     def _set_task_state(self, ts: TaskState, reason: str = "") -> None:
+        reason = reason[:200]              # Status.reason's limit: a longer one is refused
         if ts != self.task_state or reason != self.reason:
             self.task_state = ts
             self.reason = reason

@@ -568,8 +568,13 @@ def sweep_reason(hi: float, lo: float, by=()) -> str:
     once the robot is back at its vertex (with " (return: why)" after it when it could not
     get back)."""
     low = "end" if lo == -math.inf else f"{lo:.3f}"
-    ids = sorted({int(i) for i in by})
+    ids = sorted({int(i) for i in by})[:SWEEP_BY_MAX]
     return f"swept {hi:.3f} {low}" + (" by " + ",".join(map(str, ids)) if ids else "")
+
+
+# at most this many robot ids after "by" (the reason stays well within Status.reason's 200
+# characters); a touch sector holds one or two robots
+SWEEP_BY_MAX = 8
 
 
 def sweep_stoppers(reason: str) -> tuple[int, ...]:

@@ -217,3 +217,20 @@ def test_zenoh_cli_decoder_entry_point():
     assert line["_t"] == "Sense" and line["key"] == "sc/x/robot/1/sense" and line["ids"] == [2, 5]
     bad = json.loads(decode_fn("sc/x/robot/1/sense", b"\x00"))
     assert "_error" in bad and "Sense" not in bad.get("_t", "")
+
+
+@given(hi=st.floats(-1.0, 2.0), end=st.booleans(), lo=st.floats(-1.0, 1.0),
+       by=st.lists(st.integers(0, 10**6), max_size=20),
+       tail=st.sampled_from(["", " (return: lost landmarks)"]))
+def test_a_sweep_reason_carries_its_stoppers_and_fits_a_status(hi, end, lo, by, tail):
+    """"swept HI LO by IDS": the fractions parse back (3 decimals), the robots that stopped
+    the sweep too (sorted, at most SWEEP_BY_MAX), after a failed return's words as well; the
+    reason always fits Status.reason."""
+    from swarmcover.bus.messages import (SWEEP_BY_MAX, Status, parse_sweep_reason,
+                                         sweep_reason, sweep_stoppers)
+    r = sweep_reason(hi, -math.inf if end else lo, by) + tail
+    h, l = parse_sweep_reason(r)
+    assert h == pytest.approx(hi, abs=6e-4)
+    assert (l == -math.inf) if end else l == pytest.approx(lo, abs=6e-4)
+    assert sweep_stoppers(r) == tuple(sorted(set(by))[:SWEEP_BY_MAX])
+    Status(robot=1, reason=r)
