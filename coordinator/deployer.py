@@ -300,7 +300,8 @@ class Deployer:
         # (bench/unseen.py seed 0 map 8: one stalled move at the door cut 14 robots off)
         now_stray = {snap.occupant[v] for v in strays}
         self.stray_plans = {r: self.stray_plans.get(r, 0) + 1 for r in now_stray}
-        strays = {v for v in strays if self.stray_plans[snap.occupant[v]] >= self.cfg.stray_cycles}
+        strays = {v for v in strays
+                  if self.stray_plans[snap.occupant[v]] >= self.cfg.stray_cycles}
         waiting = len(now_stray) - len(strays)        # cut off, still members
         if strays:
             for v in sorted(strays):

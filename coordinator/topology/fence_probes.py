@@ -269,14 +269,16 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
     'sweep_gap') or, with ``TopologyParams.clear_infers`` off and some probe clear,
     probing with no deployment (the run ends uncertified). With ``TopologyParams.sweep``
     a side of an edge with a triangle (one open side in ``open_sides``) is swept
-    (:func:`_side_sweeps`); a dangling edge's sides are probed."""
+    (:func:`_side_sweeps`); a dangling edge's sides are probed, and so is a side whose
+    sweeps are over when a robot cut off from the swarm stopped one (``ev.foreign``)."""
     marks = dict(marks)
     probing: dict[tuple[int, int], list[Deployment]] = {}
     for e, sg in sorted(ends):
         if (e, sg) in marks:
             continue
         sweep = P.sweep and open_sides is not None and len(open_sides.get(e, ())) == 1
-        if sweep and _side_key(cx, e, sg) in ev.foreign and not _side_sweeps(cx, L, P, room, ev, e, sg)[0]:
+        if (sweep and _side_key(cx, e, sg) in ev.foreign
+                and not _side_sweeps(cx, L, P, room, ev, e, sg)[0]):
             # its sweeps are over, and a robot cut off from the swarm stopped one: it stands
             # in free space the complex does not hold, perhaps in the gap, and no inference
             # closes that. The probe rule drives into the side at every fraction instead: a
