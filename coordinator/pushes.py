@@ -273,12 +273,14 @@ class Pushes:
         holder = self.placement.holders(self.roster)
         return self.tasks.move(path, t, self._in_motion(holder),
                                None if mover is None else mover.robot, holder=holder,
-                               beyond=self._beyond(job) if t + 2 == len(path) else None)
+                               beyond=self._beyond(job) if t >= 0 and t + 2 == len(path) else None)
 
     def _beyond(self, job: PushJob) -> tuple[int, float] | None:
         """(robot, its bearing from f in f's frame, rad) of the robot the push's test drive
         placed straight out from f (a clear drive or one kept at a wall, not a probe's or a
-        sweep's): a landmark of f for the robot that refills it, at the drive's direction.
+        sweep's): a landmark of f for the robot that moves there, at the drive's direction
+        (not for a robot entering a source vertex: it starts there; homing on that one
+        bearing drew entering robots off the source, small seed 0 27 -> 35 robots).
         None otherwise. Without it, f's only neighbour being the mover's own vertex left
         the mover no landmark at all: it was booked at f without moving (bench/unseen.py
         seed 0 map 8: a vertex in a 0.30 m door, its new robot beyond the door then cut off

@@ -240,8 +240,9 @@ class TaskBuilder:
         ``moving`` ones (``holder``: vertex -> the robot there now; None: the snapshot's
         occupants); plus ``ahead``, the robot now at p_{t+2} once it has arrived
         (sequential fallback). The bearings are the target's recorded ones; ``beyond`` (the
-        robot a test drive placed out from the target, its bearing from there) joins them
-        when fewer than two are left. Returns None when no landmark at all is available.
+        robot a test drive placed out from the target, its bearing from there) is the one
+        landmark when none of those is left (with one of them, it cost robots: small seed 0,
+        27 -> 37). Returns None when no landmark at all is available.
         """
         target = path[t + 1]
         lm, br = self.vertex_landmarks(target, moving, holder)
@@ -250,7 +251,7 @@ class TaskBuilder:
             if b is not None:
                 lm.append(ahead)
                 br.append(b)
-        if beyond is not None and len(lm) < 2 and beyond[0] not in lm:
+        if beyond is not None and not lm:
             lm.append(beyond[0])
             br.append(beyond[1])
         if not lm:
