@@ -179,6 +179,21 @@ def test_no_inference_closes_a_gap_a_cut_off_robot_stopped_the_sweeps_at(case, i
         assert probes and all(0.0 < d.via_frac < 1.0 for d in probes)
 
 
+def test_sweeps_that_joined_close_on_evidence_whoever_stopped_them():
+    """The two ends' sweeps joined over the whole edge: the wall is felt all along it, and
+    a cut-off robot seen where one of them stopped changes nothing ('probes', no probe)."""
+    from swarmcover.coordinator.jobs import evidence_kwargs
+    cx, ev = _candidate()
+    a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
+    ev.record(a, touched=True, swept=(0.58, -INF), by=(42,))
+    ev.record(b, touched=True, swept=(0.57, -INF))
+    f = detect_fence(cx, test_drive_failures=ev.failed_directions(),
+                     **evidence_kwargs(ev, _tri_snap(cut=True)))
+    e, side = _side(f, cx)
+    assert e in f.obstacle.tolist() and side.reason == "probes" and not f.inferred
+    assert not [d for lst in f.deployments.values() for d in lst if d.edge == (0, 1)]
+
+
 def test_a_sweep_that_found_room_is_no_evidence():
     """A sweep whose robot stayed at an opening (or where its wall receded) is a clear
     drive: that end is never offered again, and the side, still one-sided, closes only as

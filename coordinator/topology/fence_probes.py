@@ -277,18 +277,17 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
         if (e, sg) in marks:
             continue
         sweep = P.sweep and open_sides is not None and len(open_sides.get(e, ())) == 1
-        if (sweep and _side_key(cx, e, sg) in ev.foreign
-                and not _side_sweeps(cx, L, P, room, ev, e, sg)[0]):
-            # its sweeps are over, and a robot cut off from the swarm stopped one: it stands
-            # in free space the complex does not hold, perhaps in the gap, and no inference
-            # closes that. The probe rule drives into the side at every fraction instead: a
-            # probe that finds room there stays, seen by that robot, which then links
-            # again (closed, the room behind a 0.30 rv door was certified at 54% coverage:
-            # bench/unseen.py seed 0 map 8)
-            sweep = False
         if sweep:
             inner, n_open, n_clear = _side_sweeps(cx, L, P, room, ev, e, sg)
-        else:
+            # its sweeps are over short of closing it on evidence, and a robot cut off from
+            # the swarm stopped one: it stands in free space the complex does not hold,
+            # perhaps in the gap, and no inference closes that. The probe rule drives into
+            # the side at every fraction instead: a probe that finds room there stays, seen
+            # by that robot, which then links again (closed, the room behind a 0.30 rv door
+            # was certified at 54% coverage: bench/unseen.py seed 0 map 8)
+            sweep = (bool(inner) or (n_open == 0 and n_clear == 0)
+                     or _side_key(cx, e, sg) not in ev.foreign)
+        if not sweep:
             inner, n_open, n_clear = _side_probes(cx, L, P, room, ev, e, sg)
         if inner:
             probing[(e, sg)] = sorted(inner, key=lambda d: d.via_frac)
