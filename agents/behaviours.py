@@ -309,7 +309,7 @@ class Behaviour:
         phase = self.phase
         if phase is Phase.VIA and isinstance(mode, Open):
             self.via_back = (wrap(mode.leg.direction + PI), mode.travelled(self.see),
-                             mode.leg.speed)
+                             self._return_speed)
         match r.outcome:
             case Outcome.HELD:
                 self._mode = r.next
@@ -359,6 +359,11 @@ class Behaviour:
         self.phase = phase
         task = self.task
         self._mode = Home(goal, phase, self.frame, self.ctx, task.direction, task.distance)
+
+    @property
+    def _return_speed(self) -> float:
+        """Speed (m/s) of an open-loop leg back to the vertex: it retraces a leg just driven."""
+        return self.p.return_speed_frac * self.p.v_max
 
     def _enter_open(self, direction: float, distance: float, speed: float, phase: Phase,
                     single: int | None = None) -> None:
@@ -478,7 +483,7 @@ class Behaviour:
         # vertex's bearings if any; a landmark lost during the drive cannot strand us
         travelled = out.travelled(self.see)
         self.return_goal = self._task_goal(self.task)
-        self._enter_open(wrap(out.leg.direction + PI), max(0.0, travelled), out.leg.speed,
+        self._enter_open(wrap(out.leg.direction + PI), max(0.0, travelled), self._return_speed,
                          Phase.RETURN)
 
     def _sweep_back(self, sweep: Sweep, reason: str) -> None:
@@ -490,7 +495,7 @@ class Behaviour:
             return self._home_back(goal)
         self.return_goal = goal
         self._enter_open(math.atan2(-sweep.R[1], -sweep.R[0]), math.hypot(*sweep.R),
-                         self.p.test_drive_speed_frac * self.p.v_max, Phase.RETURN)
+                         self._return_speed, Phase.RETURN)
 
     def _via_failed(self, why: str) -> None:
         """A probe's approach to its point on the edge failed: home back to the vertex and

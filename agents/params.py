@@ -75,6 +75,10 @@ class AgentParams:
     sweep_speed_frac: float = 0.5    # sliding along the wall, fraction of v_max. The doors a
                                      # sweep finds were measured at 0.5: at 1.0 it found 12 of
                                      # 14 doors 0.18 m wide and 8 of 14 at 0.17 m (14 / 12 at 0.5)
+    return_speed_frac: float = 1.0   # open-loop legs back to the vertex after a test drive's
+                                     # touch, a sweep or a probe's approach, fraction of v_max:
+                                     # they retrace what was just driven, and only the way out
+                                     # feels for walls (homing back corrects the rest)
     # differential drive (spec 4.8)
     k_w: float = 1.5                 # 1/s
     k_v: float = 1.0
@@ -126,7 +130,7 @@ _POSITIVE = {"v_max", "w_max", "rv", "dt", "g0", "arrive_deg", "lost_timeout_s",
              "scale_speed_frac", "scale_step_rv", "scale_max_rv", "blocked_s",
              "stall_s", "stall_deg",
              "contact_clear_rv", "k_w", "k_v", "error_alpha", "sweep_press_deg",
-             "sweep_lost_m", "sweep_budget_rv", "sweep_speed_frac"}
+             "sweep_lost_m", "sweep_budget_rv", "sweep_speed_frac", "return_speed_frac"}
 
 
 # the section of the run config each field is read from

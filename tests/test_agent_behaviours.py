@@ -241,6 +241,36 @@ def test_test_drive_touch_returns_and_fails_with_contact(with_landmarks):
     assert beh.status()["contact"]
 
 
+@pytest.mark.parametrize("frac", [0.5, 1.0])
+def test_test_drive_feels_at_its_speed_and_returns_at_the_return_speed(frac):
+    """Only the way out feels for walls: it runs at test_drive_speed_frac; the open-loop
+    leg back retraces it at return_speed_frac, and the robot ends home all the same."""
+    sim = world(me=(0.0, 0.0, 0.0), walls=[((-3, 0.6), (3, 0.6))])
+    p = AgentParams(return_speed_frac=frac)
+    beh = Behaviour(p, ME)
+    beh.on_task(task("test_drive", direction=PI / 2, distance=0.9))
+    speeds = {"out": [], "back": []}
+
+    def log():
+        cmd = beh.step(sim.sense(ME))
+        sim.apply(ME, cmd)
+        sim.advance()
+        v = math.hypot(cmd.vx, cmd.vy)
+        if v > 1e-9:
+            speeds["out" if cmd.vy > 0 else "back"].append(v)
+        return beh.task_state != "running"
+    for _ in range(600):
+        if log():
+            break
+    assert beh.task_state == "failed" and beh.reason == "touch"
+    assert max(speeds["out"]) == pytest.approx(p.test_drive_speed_frac * p.v_max)
+    assert max(speeds["back"]) == pytest.approx(frac * p.v_max)
+    assert sim.dist(ME, (0, 0)) < 0.03
+    # the way back took about the way out's time over the speed ratio
+    ratio = len(speeds["out"]) / len(speeds["back"])
+    assert ratio == pytest.approx(frac / p.test_drive_speed_frac, rel=0.2)
+
+
 @pytest.mark.parametrize("direction, offset", [(PI / 2, 0.0), (PI / 3, PI / 6), (2 * PI / 3, -PI / 6)])
 def test_test_drive_touch_reports_the_sector_off_the_direction_driven(direction, offset):
     """A test drive stopped by a wall reports where the touch sector that stopped it lies,
