@@ -637,6 +637,20 @@ def test_a_vertex_a_push_is_done_with_is_a_landmark_held_by_the_robot_there_now(
     assert list(zip(task.landmarks, task.bearings)) == [(105, 2.0)]
 
 
+def _edges_kept_lost(complexes) -> tuple[int, int]:
+    """Over consecutive published complexes: edges between two vertices of one that are
+    (kept) or are not (lost) in the next while both vertices still are."""
+    kept = lost = 0
+    for a, b in zip(complexes, complexes[1:]):
+        ea = {tuple(sorted(a.edges[i:i + 2])) for i in range(0, len(a.edges), 2)}
+        eb = {tuple(sorted(b.edges[i:i + 2])) for i in range(0, len(b.edges), 2)}
+        both = set(b.vertices)
+        for e in ea:
+            if e[0] in both and e[1] in both:
+                kept, lost = kept + (e in eb), lost + (e not in eb)
+    return kept, lost
+
+
 @pytest.mark.timeout(240)
 def test_a_pipelined_run_keeps_the_fixed_graph_and_the_certificate(monkeypatch):
     """Issue 19 item 4, a seeded in-process run (small map, seed 1) where pushes stream from
@@ -663,14 +677,7 @@ def test_a_pipelined_run_keeps_the_fixed_graph_and_the_certificate(monkeypatch):
     assert _coverage(sim, res) >= 0.995
     assert len(early) >= 10, early          # measured: 34 test drives ran ahead of a feed (0 with
                                             # pipeline = false)
-    kept = lost = 0
-    for a, b in zip(res.complexes, res.complexes[1:]):
-        ea = {tuple(sorted(a.edges[i:i + 2])) for i in range(0, len(a.edges), 2)}
-        eb = {tuple(sorted(b.edges[i:i + 2])) for i in range(0, len(b.edges), 2)}
-        both = set(b.vertices)
-        for e in ea:
-            if e[0] in both and e[1] in both:
-                kept, lost = kept + (e in eb), lost + (e not in eb)
+    kept, lost = _edges_kept_lost(res.complexes)
     # measured: 1 of 988 (seeds 0-2: 9 of 3,518; the barrier-per-push rule: 13 of 4,309)
     assert lost <= 0.01 * (kept + lost), (lost, kept)
 
@@ -696,14 +703,7 @@ def test_a_streamed_run_keeps_the_fixed_graph_and_the_certificate(monkeypatch):
     assert res.certified, res.stop_reason
     assert _coverage(sim, res) >= 0.995
     assert went, "no push streamed down the path of the one before it"
-    kept = lost = 0
-    for a, b in zip(res.complexes, res.complexes[1:]):
-        ea = {tuple(sorted(a.edges[i:i + 2])) for i in range(0, len(a.edges), 2)}
-        eb = {tuple(sorted(b.edges[i:i + 2])) for i in range(0, len(b.edges), 2)}
-        both = set(b.vertices)
-        for e in ea:
-            if e[0] in both and e[1] in both:
-                kept, lost = kept + (e in eb), lost + (e not in eb)
+    kept, lost = _edges_kept_lost(res.complexes)
     assert lost <= 0.01 * (kept + lost), (lost, kept)
 
 
