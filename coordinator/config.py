@@ -145,13 +145,6 @@ class CoordinatorConfig:
                                    # config seeds 0-2, against false before the settle fix
                                    # (Pushes._claimed_elsewhere): 2,357 -> 2,351 robots,
                                    # 44,295 -> 40,710 s simulated (hall300: README)
-    stream: bool = False           # once no further vertex-disjoint path is found, a
-                                   # source's next push may share the start of its last
-                                   # one: its test drive runs at once, its movers once that
-                                   # push is over (planner._streamed). Measured off -> on,
-                                   # six configs seeds 0-2: 1,350 -> 1,385 robots (+2.6%),
-                                   # 17,405 -> 17,611 s simulated (+1.2%); corridor_doors
-                                   # 140 -> 99 cycles (seed 0) for the same time. So off
     max_cycles: int = 100000
     final_recheck: bool = True     # after K is empty: redistribute redundant robots, re-certify
 

@@ -329,8 +329,7 @@ class Deployer:
             free_probes=self.cfg.free_probes,
             returned_probes=self.evidence.returned_probes(snap.occupant),
             sweeps_last=self.cfg.sweeps_last, out=frozenset(out),
-            sweeps_free=self.cfg.sweeps_free, free_max=self.cfg.free_max,
-            stream=self.cfg.stream)
+            sweeps_free=self.cfg.sweeps_free, free_max=self.cfg.free_max)
         self.next_vertex += len(plan.jobs)
         self.redundant = set(plan.redundant)
         if carried or waiting:
@@ -384,7 +383,6 @@ class Deployer:
                     first = job.steps_at_source()
                     if first is not None:
                         first.robot = -1             # the robot that entered in job.feed
-                    job.bind_shared()                # the robots job.feed moves in
             self.jobs.append(job)
         missing = [k for k in range(len(self.sources)) if k not in snap.occupant]
         if missing and (plan.frontier or plan.open_vertices):

@@ -70,38 +70,6 @@ class PushJob:
             return self.step(StepName.TEST_DRIVE) or self.step(StepName.DEPLOY)
         return self.step(StepName.MOVE, 0)
 
-    def bind_shared(self) -> None:
-        """A streamed push (``spec.shared`` > 0) moves on, from p_t (1 <= t <= shared), the
-        robot its feed moves there: its mover p_{t-1} -> p_t (-1 while that is the robot
-        still entering p0)."""
-        feed = self.feed
-        for t in range(1, self.spec.shared + 1):
-            mv, src = self.step(StepName.MOVE, t), feed and feed.step(StepName.MOVE, t - 1)
-            if mv is not None:
-                mv.robot = src.robot if src is not None else -1
-
-    def stream_state(self) -> str:
-        """For a streamed push: "wait" until its feed is over, "go" once it is and moved
-        every robot it shares in; "own" when the feed will move none of them (it was
-        re-planned onto another path after a touch, or aborted before they moved): the
-        push is then an ordinary one with the snapshot's robots; "fail" when the feed
-        stopped with some of them moved. "go" for any other push."""
-        k = self.spec.shared
-        feed = self.feed
-        if k <= 0:
-            return "go"
-        if feed is None or feed.spec.path[:k + 1] != self.spec.path[:k + 1]:
-            return "own"      # re-planned: a touch comes back before anything moves
-        moves = [feed.step(StepName.MOVE, t) for t in range(k)]
-        if feed.aborted and all(m is not None and m.state in (StepState.PENDING,
-                                                              StepState.CANCELLED)
-                                for m in moves):
-            return "own"
-        if feed.aborted or any(m is None or m.state in (StepState.FAILED, StepState.CANCELLED)
-                               for m in moves):
-            return "fail"
-        return "go" if feed.finished else "wait"
-
     def step(self, name: str, t_index: int = -1) -> Step | None:
         for s in self.steps:
             if s.name == name and s.t_index == t_index:

@@ -79,9 +79,6 @@ class JobSpec:
     sweep_side: int = 0
     sweep_edge: float = 0.0
     sweep_points: dict = field(default_factory=dict)
-    shared: int = 0                # streamed (``[coordinator] stream``): path[1..shared] is
-                                   # the previous push's from the same source; its movers
-                                   # there are the robots that push moves in
 
 
 @dataclass
@@ -135,7 +132,7 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
                evidence: dict | None = None, free_probes: bool = False,
                returned_probes: frozenset = frozenset(), sweeps_last: bool = False,
                out: frozenset = frozenset(), sweeps_free: bool = False,
-               free_max: int | None = None, stream: bool = False) -> CyclePlan:
+               free_max: int | None = None) -> CyclePlan:
     """Decide one cycle. ``next_vertex``: the first unused vertex id (for new positions).
 
     lattice_spacing: when set (rv units) and every robot is holonomic, each new position
@@ -156,8 +153,6 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     the push fence offers nothing but sweeps, free probes are chosen first (off the sources
     and ``out`` only) and pushes avoid them and their neighbours. free_max: free probes
     per cycle at most (None: max_paths).
-    stream: once no further vertex-disjoint path is found, a source's pushes may also share
-    the start of the last path planned from it (:func:`_streamed`).
     certified is False whenever the fence has no one-sided edge (an empty target cycle
     proves nothing).
     previous_redundant: redundant vertices found earlier (used as path starts until the
@@ -225,20 +220,10 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
         if extra is None:
             break
         chosen.append(extra)
-    shared = [0] * len(chosen)
-    while stream and len(chosen) < max_paths and snap.sources:
-        extra = _streamed(cx, push_fence, params, chosen, snap.sources,
-                          _claimed(cx, [pth.vertices for pth in chosen]) | hold)
-        if extra is None:
-            break
-        chosen.append(extra[0])
-        shared.append(extra[1])
 
     vid = next_vertex + len(first)
-    for pth, k in zip(chosen, shared):
-        spec = _job_spec(snap, params, pth, vid, test_drive, scale_correct)
-        spec.shared = k
-        plan.jobs.append(spec)
+    for pth in chosen:
+        plan.jobs.append(_job_spec(snap, params, pth, vid, test_drive, scale_correct))
         vid += 1
     plan.jobs.extend(first)
     # free probes: a frontier robot away from every push probes its side in the same cycle,
@@ -254,39 +239,6 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
     if lattice_spacing and plan.jobs:
         _place_on_lattice(snap, plan.jobs, float(lattice_spacing), params, test_drive_failures)
     return plan
-
-
-def _streamed(cx, fence, params: TopologyParams, chosen: list, sources, used: set):
-    """(path, shared) of a push that streams down the start of the last path ``chosen``
-    from a source, or None: the path p0 .. pj of that path (j >= 1, before its frontier
-    vertex), then on through vertices no push of the cycle takes (``used``) to a frontier
-    vertex off ``used``; the cheapest over every source and branch vertex pj.
-
-    In a corridor two robots wide the first path from the source and the neighbours of its
-    frontier vertex cross the corridor, so no second vertex-disjoint path exists and a
-    cycle pushed one robot (corridor_doors seed 0, before the return speed: at most one push
-    in 135 of 144 plans, with a median 19 frontier edges open at those with one). A streamed push runs as a pipelined one (its test drive beside
-    the push it follows) but its movers wait until that push is over, then move on the
-    robots it brought to p1 .. pj (coordinator.pushes)."""
-    from .topology.paths import PushPath, plan_pushes
-
-    best = None
-    for s in sources:
-        last = [pth for pth in chosen if pth.vertices[0] == s]
-        if not last:
-            continue
-        P = last[-1].vertices
-        for j in range(1, len(P) - 1):
-            found = plan_pushes(cx, fence, [P[j]], (), params=params, max_paths=1,
-                                exclude=used - {P[j]})
-            if not found or found[0].frontier in used:
-                continue
-            pth = found[0]
-            key = (j + pth.cost, -pth.deployment.clearance, int(pth.frontier))
-            if best is None or key < best[0]:
-                best = (key, PushPath(tuple(P[:j]) + tuple(pth.vertices), pth.deployment,
-                                      j + pth.cost), j)
-    return None if best is None else best[1:]
 
 
 def _keeping(fence, keep) -> dict:

@@ -170,8 +170,6 @@ class Pushes:
         # seeds 0-8, 310 -> 277 robots and 5,497 -> 4,186 s simulated. Its movers still
         # wait: starting them too (robots homing while the source is refilled behind them)
         # made tiny's seeds 0-8 cost 113 -> 124 robots.
-        if spec.shared and self._stream_waits(job, movers=False):
-            return
         first = job.steps_at_source()
         if first is not None and first.robot < 0:
             rid = job.source_robot()
@@ -216,8 +214,6 @@ class Pushes:
                 ref = job.step(N.REFINE)
                 if ref is not None and ref.state == S.PENDING:
                     ref.state, ref.reason = S.CANCELLED, placed
-        if spec.shared and self._stream_waits(job, movers=True):
-            return
         if first is not None and first.robot < 0:
             return   # the rest waits for p0's robot, which the source's earlier push brings
         if dep.state == S.PENDING:
@@ -260,36 +256,6 @@ class Pushes:
                 self.start(ref, task, now)
         if self.cfg.settle_moves:
             self._settle_moves(job, now)
-
-    def _stream_waits(self, job: PushJob, movers: bool) -> bool:
-        """Whether a streamed push (``[coordinator] stream``) waits, or was cancelled: its
-        path is the feed's up to p_shared, so nothing of it starts before the feed's test
-        drive has fixed that path (a touch re-plans it); its movers on p1 .. p_shared are
-        the robots the feed moves there, and go once the feed is over (``movers``)."""
-        state = job.stream_state()
-        if state == "fail":
-            job.cancel("stream feed failed")
-            return True
-        if state == "own":
-            self._unshare(job)
-            return False
-        if not movers:
-            ftd = job.feed.step(N.TEST_DRIVE)
-            return ftd is not None and ftd.state != S.DONE
-        if state == "wait":
-            return True
-        job.bind_shared()
-        return False
-
-    def _unshare(self, job: PushJob) -> None:
-        """A streamed push whose feed moves none of the robots it shares: it moves the
-        robots the snapshot has on p1 .. p_shared itself, as any push."""
-        occupant = self.snapshot.occupant
-        for t in range(1, job.spec.shared + 1):
-            mv = job.step(N.MOVE, t)
-            if mv is not None:
-                mv.robot = occupant[job.spec.path[t]]
-        job.spec.shared = 0
 
     def _task_move(self, job: PushJob, t: int, arrived: bool) -> Task | None:
         """The task of the robot moving p_t -> p_{t+1} (t = -1: entering p0); ``arrived``:
