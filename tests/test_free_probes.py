@@ -11,6 +11,7 @@ import math
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from swarmcover.bus.messages import Status
 from swarmcover.coordinator import build_complex, detect_fence
@@ -392,3 +393,132 @@ def test_a_probe_that_would_cut_the_pushes_off_their_frontier_is_waited_for_not_
     rplan = _plan(room, free_probes=True)
     (rf,) = [j.path[0] for j in rplan.jobs if j.free]
     assert carryable(rplan.edges, room.sources, rplan.open_vertices, [rf]) == {rf}
+
+
+# a strip two rows deep (rv = 1 m): bottom row 0-4, top row 5-8; vertex 0 is the source
+STRIP = np.array([[x, 0.0] for x in (0.0, 0.9, 1.8, 2.7, 3.6)]
+                 + [[x, 0.78] for x in (0.45, 1.35, 2.25, 3.15)])
+ALL_ROUND = [k * 40 * DEG for k in range(9)]   # drives that touched all round a vertex
+
+
+def _scouting(cfg=CoordinatorConfig(scouts=True)):
+    """A push 0 -> 1 -> 2 -> 3 on STRIP (0, 1 and 2 touched all round; 5 and 6 taken by
+    other pushes when it was planned), at its test drive, and the scouts that start then."""
+    snap = Snapshot(occupant={v: 100 + v for v in range(len(STRIP))},
+                    nbrs={v: _nbrs(STRIP, v) for v in range(len(STRIP))}, contact={},
+                    sources=[0], source_dirs=[90 * DEG])
+    fails = {v: list(ALL_ROUND) for v in (0, 1, 2)}
+    spec = replan_push(snap, cfg.topology(), start=0, busy=[], exclude={5, 6},
+                       test_drive_failures=fails, new_vertex=20, scale_correct=False,
+                       test_drive=True, sweeps_last=True)
+    assert spec.path == [0, 1, 2, 3]
+    dep, seq = _deployer(snap, cfg)
+    for v, dirs in fails.items():
+        for a in dirs:
+            dep.evidence.add_failed_direction(v, a)
+    dep.next_vertex = 21
+    push = make_job(spec, snap.occupant)
+    dep.jobs = [push]
+    dep.pushes.advance(push, 1.0)
+    dep.pushes.scout(1.0)
+    return snap, dep, seq, push, dep.jobs[1:]
+
+
+def _report(dep, seq, rid, v, task, t, state="done", reason=""):
+    dep.on_status(Status(robot=rid, seq=next(seq), t=t, state="holding", vertex=v,
+                         task_id=task.task_id, task_state=state, reason=reason))
+
+
+def test_scouts_drive_off_the_paths_while_the_pushes_test_drive_and_the_path_waits_for_them():
+    """``scouts``: while the push waits on its test drive at 3, frontier robots off its
+    path, off the source, not next to 3 nor to each other, drive one deployment each (no
+    wall sweep) and come home; the push's movers wait while a scout next to its path is
+    out, and no scout starts once a push's drive is over."""
+    snap, dep, seq, push, scouts = _scouting()
+    nb = snap.nbrs
+    at = [j.spec.path for j in scouts]
+    assert [5] in at                                # next to the path's 0 and 1
+    for j in scouts:
+        (g,) = j.spec.path
+        assert j.spec.free and j.spec.scout and j.spec.sweep_far == 0
+        assert g not in push.spec.path and g not in snap.sources
+        assert 3 not in nb[g] and g not in nb[3]
+        assert not any(h in nb[g] for (h,) in at if h != g)
+    dep.out.actions = []
+    for j in scouts:
+        dep.pushes.advance(j, 1.0)
+    sent = {t.robot: t for t in _tasks(dep)}
+    assert {t.kind for t in sent.values()} == {"test_drive"}
+    assert set(sent) == {snap.occupant[g] for (g,) in at}
+    # only a touch within the no-room depth is evidence: that is as far as a scout drives,
+    # and any touch on the way fails it (nobody is kept at a wall)
+    for t in sent.values():
+        assert t.distance == pytest.approx(CoordinatorConfig().wall_keep)
+        assert t.keep_after == 0.0
+    # the push's drive at 3 is clear: its robot stays there as the new vertex, but the
+    # scout at 5 is out next to the path: nobody moves yet, and no new scout starts
+    td = push.step("test_drive")
+    _report(dep, seq, 103, 3, td, 2.0)
+    dep.out.actions = []
+    dep.pushes.advance(push, 2.0)
+    n = len(dep.jobs)
+    dep.pushes.scout(2.0)
+    assert not _tasks(dep) and len(dep.jobs) == n
+    assert all(s.state == "pending" for s in push.steps if s.name == "move")
+    # each scout's drive is clear: it reverses its drive open loop (from out there f's
+    # neighbours may be out of sight), then homes (no evidence), and its deployment is not
+    # scouted again
+    for j in scouts:
+        (g,) = j.spec.path
+        rid = snap.occupant[g]
+        td = next(t for t in sent.values() if t.robot == rid)
+        _report(dep, seq, rid, g, j.step("test_drive"), 3.0)
+        dep.out.actions = []
+        dep.pushes.advance(j, 3.0)
+        (back,) = _tasks(dep)
+        assert back.kind == "deploy" and back.landmarks == [] and back.robot == rid
+        assert back.distance == td.distance
+        assert math.cos(back.direction - td.direction) == pytest.approx(-1.0)
+        dep.out.actions = []
+        dep.pushes.advance(j, 3.5)
+        assert not _tasks(dep)                      # still driving back
+        _report(dep, seq, rid, g, back, 3.8)
+        dep.pushes.advance(j, 3.8)
+        (home,) = _tasks(dep)
+        assert home.kind == "goto" and home.vertex == g
+        assert j.spec.deployment.vertex == g
+        _report(dep, seq, snap.occupant[g], g, home, 4.0)
+        assert j.finished and dep.vertex_of[snap.occupant[g]] == g
+    assert dep.evidence.failed_directions().keys() == {0, 1, 2}
+    # every scout home: the movers go, from the front
+    dep.out.actions = []
+    dep.pushes.advance(push, 4.0)
+    moves = _tasks(dep)
+    assert moves and moves[0].robot == 102 and moves[0].vertex == 3
+    # a later cycle does not scout those deployments again
+    from swarmcover.coordinator.topology.paths import deployment_key
+    done = {deployment_key(j.spec.deployment) for j in scouts}
+    assert done <= dep.pushes.scouted
+    dep.pushes.cycle += 1
+    again = make_job(replace(push.spec), snap.occupant)
+    dep.jobs = [again]
+    dep.pushes.advance(again, 5.0)
+    dep.pushes.scout(5.0)
+    assert not done & {deployment_key(j.spec.deployment) for j in dep.jobs[1:]}
+
+
+def test_a_scout_that_touched_books_the_failed_direction_and_is_not_re_planned():
+    snap, dep, seq, push, scouts = _scouting()
+    j = next(j for j in scouts if j.spec.path == [5])
+    dep.out.actions = []
+    dep.pushes.advance(j, 1.0)
+    (td,) = _tasks(dep)
+    _report(dep, seq, 105, 5, td, 2.0, state="failed", reason="touch")
+    dep.out.actions = []
+    dep.pushes.advance(j, 2.0)
+    assert j.aborted and j.finished and not _tasks(dep)
+    assert dep.evidence.failed_directions()[5] == [j.spec.direction]
+    assert dep.vertex_of[105] == 5
+    # off: no scout
+    *_, none = _scouting(CoordinatorConfig(scouts=False))
+    assert none == []
