@@ -145,18 +145,6 @@ class CoordinatorConfig:
                                    # config seeds 0-2, against false before the settle fix
                                    # (Pushes._claimed_elsewhere): 2,357 -> 2,351 robots,
                                    # 44,295 -> 40,710 s simulated (hall300: README)
-    scouts: bool = False           # while every push of the cycle waits on its test drive
-                                   # (nothing of any path has moved), frontier robots off the
-                                   # paths and not next to a vertex being driven from drive
-                                   # one of their own deployments (not a sweep) as free
-                                   # probes and come home: a touch is the same evidence a
-                                   # push's drive gives, so a push whose drive touched is
-                                   # re-planned on it instead of touching there next; a
-                                   # push's movers wait while a scout next to its path is out.
-                                   # A scout drives only the no-room depth and reverses a clear
-                                   # drive before it homes. In-process, six configs (tiny ..
-                                   # structured) seeds 0-2, on: 1,476 -> 1,599 robots (+8.3%),
-                                   # 19,183 -> 21,182 s simulated (+10.4%): it stays off
     max_cycles: int = 100000
     final_recheck: bool = True     # after K is empty: redistribute redundant robots, re-certify
 

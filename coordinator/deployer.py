@@ -215,7 +215,6 @@ class Deployer:
         for job in self.jobs:
             self.pushes.advance(job, now)
         self.pushes.roll_free_probes(now)
-        self.pushes.scout(now)
         carried = self.pushes.carried(self.plan)
         if ((self.pushes.finished or carried is not None) and not self.pending_holds
                 and self.placement.all_settled(self.roster,

@@ -26,7 +26,6 @@ class StepName(StrEnum):
     REFINE = "refine"           # the deployed robot re-homes once f is held again
     SETTLE = "settle"           # a mover that homed on < 2 landmarks homes on all
     HOME = "home"               # a free probe that drove clear goes back to its vertex
-    BACK = "back"               # a scout that drove clear reverses its drive, then homes
 
 
 class StepState(StrEnum):

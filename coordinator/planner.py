@@ -74,8 +74,6 @@ class JobSpec:
     deployment: object = None      # the coordinator.topology.fence.Deployment driven (for Evidence)
     free: bool = False             # a probe off every path (path [f], nobody refills f):
                                    # it ends back at f whatever it found
-    scout: bool = False            # a free drive started while the pushes wait on their
-                                   # test drives (planner.scout_specs): any kind but a sweep
     sweep_far: float = 0.0         # wall sweep (see above): 0 = none
     sweep_stop: float = 0.0
     sweep_side: int = 0
@@ -403,66 +401,6 @@ def more_free_probes(snap: Snapshot, params: TopologyParams, *, movers: set[int]
     cx, fence = _complex_and_fence(snap, params, test_drive_failures, evidence)
     return _free_probe_specs(snap, params, cx, fence, movers, new_vertex, max_n, returned,
                              skip=frozenset(skip))
-
-
-def scout_specs(snap: Snapshot, params: TopologyParams, *, on: set[int], near: set[int],
-                test_drive_failures: dict[int, list[float]], new_vertex: int, max_n: int,
-                evidence: dict | None = None, returned=frozenset(), scouted=frozenset(),
-                lattice_spacing: float | None = None, depth: float | None = None
-                ) -> list[JobSpec]:
-    """Scouts (``[coordinator] scouts``): free test drives started while every push of the
-    cycle waits on its own test drive, none of whose robots has moved yet.
-
-    A push whose drive touches is re-planned to the next-best deployment, whose drive runs
-    only then: on corridor_doors seed 0, 54 of 118 cycles moved no robot at all (each push
-    touched up to three times in a row), 34% of the simulated time. A scout drives one
-    of the deployments the fence offers at its own vertex (the one a push would take
-    there; never a wall sweep) and comes home whatever it found; a touch is booked as a
-    push's would be, so the re-planned push goes elsewhere. A clear drive or one kept at
-    a wall is no evidence: that deployment is not scouted again (``scouted``, keys of
-    :func:`coordinator.topology.paths.deployment_key`) and a push takes it later.
-
-    on: vertices no scout goes to (the sources, every push path, robots gone or moved,
-    vertices that drove free this cycle). near: vertices no scout goes next to (the
-    frontier vertices being test-driven and the probes still out, whose robots home back
-    on their neighbours). Lowest vertex first, none next to another; at most ``max_n``.
-    """
-    from .topology.paths import PushPath, deployment_key
-
-    cx, fence = _complex_and_fence(snap, params, test_drive_failures, evidence)
-    fence = _without_probes(fence, frozenset(returned))
-    avoid = set(int(v) for v in on)
-    for v in near:
-        if v in cx:
-            avoid.add(int(v))
-            avoid.update(int(x) for x in cx.neighbours(v))
-    out: list[JobSpec] = []
-    for f in sorted(fence.deployments):
-        if len(out) >= max_n:
-            break
-        f = int(f)
-        if f in avoid or f not in cx or f not in snap.occupant:
-            continue
-        deps = [d for d in fence.deployments[f]
-                if not d.sweep_far > 0 and deployment_key(d) not in scouted]
-        if not deps:
-            continue
-        dep = max(deps, key=lambda d: (d.clearance, -d.sigma))   # as plan_pushes picks
-        spec = _job_spec(snap, params, PushPath((f,), dep, 0.0), new_vertex, True, False)
-        spec.free = spec.scout = True
-        out.append(spec)
-        new_vertex += 1
-        avoid.add(f)
-        avoid.update(int(x) for x in cx.neighbours(f))
-    if lattice_spacing and out:
-        _place_on_lattice(snap, out, float(lattice_spacing), params, test_drive_failures)
-    if depth is not None:
-        from .tasks import td_length
-        for spec in out:
-            # only a touch within the no-room depth is evidence: a scout drives that far,
-            # and a clear one reverses exactly that far before it homes
-            spec.distance = min(float(depth), td_length(spec, params))
-    return out
 
 
 def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: list[JobSpec],

@@ -19,11 +19,9 @@ from .config import CoordinatorConfig, PushMode
 from .jobs import (FINISHED, OVER, PushJob, Step, StepName, StepState, drive_failures,
                    evidence_kwargs, make_job)
 from .placement import Placement
-from .planner import (JobSpec, Snapshot, carryable, more_free_probes, replan_push,
-                      scout_specs)
+from .planner import JobSpec, Snapshot, carryable, more_free_probes, replan_push
 from .roster import Roster
 from .tasks import TaskBuilder, td_length
-from .topology.paths import deployment_key
 from .topology.evidence import Evidence
 
 log = logging.getLogger("swarmcover.coordinator")
@@ -52,8 +50,6 @@ class Pushes:
         self.tasks: TaskBuilder | None = None
         self._rolled: tuple[int, int] = (-1, -1)   # (cycle, jobs over) last rolled at
         self._carry_at: tuple = (None, False)      # (cycle, probes out), may all stay out
-        self._scouted_at: tuple = ()               # the drives scouts were last looked for at
-        self.scouted: set[tuple] = set()           # deployment keys scouts drove (the run)
 
     @property
     def snapshot(self) -> Snapshot | None:
@@ -220,8 +216,6 @@ class Pushes:
                     ref.state, ref.reason = S.CANCELLED, placed
         if first is not None and first.robot < 0:
             return   # the rest waits for p0's robot, which the source's earlier push brings
-        if self._scout_near(job):
-            return   # a scout next to the path homes back on it: its robots hold still
         if dep.state == S.PENDING:
             self.start(dep, self.tasks.deploy(spec, self._moving()), now)
         sequential = self.cfg.push_mode == PushMode.SEQUENTIAL
@@ -323,23 +317,12 @@ class Pushes:
             return
         spec = job.spec
         f = spec.path[-1]
-        back = job.step(N.BACK)
-        if back is None:
-            if spec.deployment is not None:
-                self.evidence.record(spec.deployment, False, direction=float(spec.direction),
-                                     returned=True)
-            for s in job.steps:
-                if s.state == S.PENDING:
-                    s.state, s.reason = S.CANCELLED, "free probe goes home"
-            if spec.scout and not td.reason:
-                # it drove its whole length clear: that far back first (from out there
-                # most of f's neighbours may be out of sight), then home
-                back = Step(N.BACK, td.robot, f)
-                job.steps.append(back)
-                self.start(back, self.tasks.back(spec), now)
-                return
-        elif back.state not in FINISHED:
-            return
+        if spec.deployment is not None:
+            self.evidence.record(spec.deployment, False, direction=float(spec.direction),
+                                 returned=True)
+        for s in job.steps:
+            if s.state == S.PENDING:
+                s.state, s.reason = S.CANCELLED, "free probe goes home"
         home = Step(N.HOME, td.robot, f)
         job.steps.append(home)
         lm, br = self.tasks.vertex_landmarks(f, exclude=set())   # f's neighbours: never td.robot
@@ -515,67 +498,6 @@ class Pushes:
             log.info("cycle %d: free probe from vertex %d within the cycle (%s)", self.cycle,
                      spec.path[-1], spec.frontier_edge)
 
-    def scout(self, now: float) -> None:
-        """Start scouts (``[coordinator] scouts``, :func:`coordinator.planner.scout_specs`)
-        while every push of the cycle waits on its test drive: each is a free drive of one
-        deployment at a frontier robot off every path, source and robot gone or moved, not
-        next to a vertex being driven from or a probe still out, and not at a vertex that
-        drove free this cycle. Looked for again each time a drive starts or ends."""
-        snap = self.snapshot
-        if snap is None or not (self.cfg.scouts and self.cfg.free_probes):
-            return
-        pushes = [j for j in self.jobs if not j.spec.free and not j.finished]
-        tds = [j.step(N.TEST_DRIVE) for j in pushes]
-        if not pushes or any(
-                td is None or td.state not in (S.PENDING, S.RUNNING)
-                or any(o.state != S.PENDING for o in j.steps if o is not td)
-                for j, td in zip(pushes, tds)):
-            return   # a push has moved (or is about to): its path's neighbours are landmarks
-        key = (self.cycle, tuple((td.task_id, str(td.state)) for td in tds),
-               sum(1 for j in self.jobs if j.finished))
-        if key == self._scouted_at:
-            return
-        self._scouted_at = key
-        out = [j for j in self.jobs if j.spec.free and not j.finished]
-        room = self.cfg.free_max - len(out)
-        if room <= 0:
-            return
-        pl = self.placement
-        on = set(snap.sources)
-        for j in self.jobs:
-            if not j.spec.free:
-                on.update(j.spec.path)
-            else:
-                on.add(j.spec.path[-1])        # a vertex drives free once a cycle
-        on |= {v for v, rid in snap.occupant.items()
-               if not self.roster.live(rid) or rid in pl.left or pl.vertex_of.get(rid) != v}
-        near = {j.spec.path[-1] for j in pushes} | {j.spec.path[-1] for j in out}
-        specs = scout_specs(
-            snap, self.params, on=on, near=near,
-            test_drive_failures=drive_failures(self.evidence, snap), new_vertex=pl.next_vertex,
-            max_n=room, evidence=evidence_kwargs(self.evidence, snap, pl.cut_off),
-            returned=self.evidence.returned_probes(snap.occupant), scouted=self.scouted,
-            lattice_spacing=self.cfg.d0 if self.cfg.lattice else None,
-            depth=self.cfg.wall_keep)
-        for spec in specs:
-            pl.next_vertex += 1
-            self.scouted.add(deployment_key(spec.deployment))
-            self.jobs.append(make_job(spec, snap.occupant))
-            log.info("cycle %d: scout from vertex %d (%s %s) while the pushes test-drive",
-                     self.cycle, spec.path[-1], spec.kind, spec.frontier_edge)
-
-    def _scout_near(self, job: PushJob) -> bool:
-        """Whether a scout still out stands on or next to ``job``'s path (push jobs only)."""
-        if job.spec.free:
-            return False
-        scouts = [j.spec.path[-1] for j in self.jobs if j.spec.scout and not j.finished]
-        if not scouts:
-            return False
-        nbrs = self.snapshot.nbrs
-        path = set(job.spec.path)
-        return any(g in path or path & set(nbrs.get(g, {}))
-                   or any(g in nbrs.get(v, {}) for v in path) for g in scouts)
-
     # ------------------------------------------------------------------ touches
     def _test_drive_failed(self, job: PushJob, td: Step) -> None:
         spec = job.spec
@@ -628,15 +550,10 @@ class Pushes:
             return False
         snap = self.snapshot
         pl = self.placement
-        if job.spec.scout:
-            return False     # a scout drives one deployment and comes home
-        busy = [j.spec for j in self.jobs if j is not job and not j.spec.scout and (
-            not j.aborted or any(s.state not in (S.PENDING, S.CANCELLED)
-                                 for s in j.steps if s.name != N.TEST_DRIVE))]
+        busy = [j.spec for j in self.jobs if j is not job and (not j.aborted or any(
+            s.state not in (S.PENDING, S.CANCELLED) for s in j.steps if s.name != N.TEST_DRIVE))]
         gone = {v for v, rid in snap.occupant.items()
                 if not self.roster.live(rid) or rid in pl.left or pl.vertex_of.get(rid) != v}
-        # a scout out: its vertex only (a path next to it waits for it, _scout_near)
-        gone |= {j.spec.path[-1] for j in self.jobs if j.spec.scout and not j.finished}
         if job.spec.free:
             # a free probe keeps its vertex (nobody refills it): only its next probe
             gone |= set(snap.occupant) - {job.spec.path[0]}

@@ -118,12 +118,6 @@ class TaskBuilder:
         return lm, br
 
     # ------------------------------------------------------------------ tasks
-    def back(self, spec: JobSpec) -> Task:
-        """A scout's drive reversed, open loop (no landmarks): back to its vertex f."""
-        import math
-        return Task(kind="deploy", vertex=spec.path[-1], direction=spec.direction + math.pi,
-                    distance=td_length(spec, self.params), timeout_s=self.cfg.task_timeout_s)
-
     def goto(self, v: int, lm: list[int], br: list[float]) -> Task:
         """The goto task to vertex v on the landmark robots ``lm`` at v's recorded bearings
         ``br`` (their chained frame offsets, the configured timeout)."""
@@ -156,7 +150,7 @@ class TaskBuilder:
                     distance=td_length(spec, self.params),
                     keep_after=self.cfg.wall_keep,
                     timeout_s=self.cfg.task_timeout_s)
-        if spec.kind == "probe" or spec.scout:
+        if spec.kind == "probe":
             # a probe's touch anywhere within its depth is evidence (the ends' disks cover
             # the way there): it goes home rather than stay against the wall (keep_after 0)
             task.keep_after = 0.0

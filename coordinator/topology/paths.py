@@ -22,7 +22,7 @@ from .complex import Complex
 from .fence import Deployment, Fence
 from .params import TopologyParams
 
-__all__ = ["PushPath", "plan_pushes", "deployment_point", "deployment_key"]
+__all__ = ["PushPath", "plan_pushes", "deployment_point"]
 
 
 @dataclass(frozen=True)
@@ -71,8 +71,7 @@ def deployment_point(cx: Complex, frame_of: int, dep: Deployment, d0: float,
     return d0 * np.array([math.cos(t_fg) + c * ox - s_ * oy, math.sin(t_fg) + s_ * ox + c * oy])
 
 
-def deployment_key(d: Deployment) -> tuple:
-    """What tells a deployment from the others: (vertex, edge, sigma, kind, via_frac)."""
+def _dep_key(d: Deployment):
     return (d.vertex, d.edge, d.sigma, d.kind, d.via_frac)
 
 
@@ -129,7 +128,7 @@ def plan_pushes(
         for f, lst in targets.items():
             if used[f] or not np.isfinite(dist[f]):
                 continue
-            ok = [d for d in lst if deployment_key(d) not in blocked and (d.edge is None or d.edge not in blocked_edges)]
+            ok = [d for d in lst if _dep_key(d) not in blocked and (d.edge is None or d.edge not in blocked_edges)]
             if not ok:
                 continue
             d = max(ok, key=lambda d: (d.clearance, -d.sigma))
@@ -153,6 +152,6 @@ def plan_pushes(
             gi = cx.index_of(g_id)
             for d2 in targets.get(gi, ()):
                 if np.linalg.norm(deployment_point(cx, fid, d2, d0, P.rv) - p_new) < sep:
-                    blocked.add(deployment_key(d2))
+                    blocked.add(_dep_key(d2))
         out.append(PushPath(tuple(int(x) for x in cx.ids[path]), dep, cost))
     return out
