@@ -11,7 +11,10 @@ the robots and mean edge length (x rv) of the last Complex; the replacements, th
 and 50th/90th/99th percentile displacement (m), the same by the number of landmarks the
 move's Task gave (fewer fix the point less well: one fixes a ray only) and by push step
 (a new robot entering the source, a move along the path, the move onto the frontier
-vertex, a settle). Without ``--oracle`` the run is the one ``bench/coverage.py`` makes.
+vertex, a settle). ``along``: the same replacements' signed miss along the move (from
+where the mover started to where the vertex's previous robot stood; negative: short of
+it, on the side it came from), mean and median (m), by landmarks. Without ``--oracle`` the
+run is the one ``bench/coverage.py`` makes.
 
 ``--oracle``: each replacement is put (teleported, in the simulator) exactly where the
 vertex's first robot stood once it reports done: the run without replacement drift, about
@@ -26,7 +29,8 @@ Measured (2026-11-28, seed 0, README "Where the vertices drift"): open_room 966
 replacements, mean 1.5 cm (one landmark: 24 moves at 15 cm, 26% of the total; two: 351 at
 1.8 cm; four or more: 0.6 cm); pillar_hall 820 at 2.7 cm, 99th percentile 89 cm.
 Drift-free (``--oracle``): open_room 136 -> 118 robots (mean edge 0.816 -> 0.864 rv),
-pillar_hall 134 -> 122 (0.756 -> 0.794 rv).
+pillar_hall 134 -> 122 (0.756 -> 0.794 rv). Along the move (2026-11-29, open_room seed
+0): 0.28 cm short on average with homing's knee at 0.3 rad, 0.04 cm at 0.15.
 """
 from __future__ import annotations
 
@@ -60,6 +64,21 @@ def displacement_table(rows: list[tuple[int, float]]) -> dict:
                                                   share=float(m.sum() / tot))
     return dict(n=int(len(d)), mean=float(d.mean()), p50=float(np.percentile(d, 50)),
                 p90=float(np.percentile(d, 90)), p99=float(np.percentile(d, 99)),
+                by_landmarks=by)
+
+
+def along_table(rows: list[tuple[int, float]]) -> dict:
+    """rows: (landmarks of the move, signed miss along it, m) -> n, mean, median (m), and
+    per landmark count (4 and more pooled) n and mean (m)."""
+    if not rows:
+        return dict(n=0)
+    D = np.asarray(rows, float).reshape(-1, 2)
+    by = {}
+    for k in (1, 2, 3, 4):
+        m = D[(D[:, 0] == k) if k < 4 else (D[:, 0] >= 4), 1]
+        if len(m):
+            by["4+" if k == 4 else str(k)] = dict(n=int(len(m)), mean=float(m.mean()))
+    return dict(n=int(len(D)), mean=float(D[:, 1].mean()), p50=float(np.median(D[:, 1])),
                 by_landmarks=by)
 
 
@@ -145,8 +164,10 @@ def run(config: str, seed: int, timeout: float, args) -> dict:
     last_pos: dict[int, tuple[float, float, int]] = {}   # vertex -> (x, y, robot) at last Complex
     first: dict[int, tuple[float, float]] = {}           # vertex -> where its first robot stood
     moved: dict[int, int] = {}                           # robot -> task id it moved under
+    start: dict[tuple[int, int], tuple[float, float]] = {}   # (robot, task) -> where it set off
     reported: set[tuple[int, int]] = set()
     rows: list[tuple[int, float]] = []
+    along: list[tuple[int, float]] = []                  # (landmarks, signed miss along the move)
     kinds: list[str] = []                                # the push step of each row
     shots: list[dict] = []                               # --plot: the swarm at each Complex
     ncx = 0
@@ -170,6 +191,8 @@ def run(config: str, seed: int, timeout: float, args) -> dict:
                 continue
             tid = b.task.task_id
             if b.state.value == "moving":
+                if moved.get(rid) != tid:
+                    start[(rid, tid)] = tuple(phys.robots[rid].body.position)
                 moved[rid] = tid
                 continue
             if (b.state.value != "holding" or b.task_state.value != "done"
@@ -182,6 +205,11 @@ def run(config: str, seed: int, timeout: float, args) -> dict:
                 continue
             x, y = phys.robots[rid].body.position
             rows.append((n_lm[(rid, tid)], math.hypot(x - prev[0], y - prev[1])))
+            s0 = start.get((rid, tid))
+            if s0 is not None and math.dist(s0, prev[:2]) > 0.2:   # entries start on it
+                ux, uy = prev[0] - s0[0], prev[1] - s0[1]
+                along.append((n_lm[(rid, tid)],
+                              ((x - prev[0]) * ux + (y - prev[1]) * uy) / math.hypot(ux, uy)))
             kinds.append(_step_kind(sim.dep.pushes.jobs, rid, tid))
             if args.oracle and v in first:
                 phys.teleport(rid, first[v][0], first[v][1], 0.0)
@@ -197,6 +225,7 @@ def run(config: str, seed: int, timeout: float, args) -> dict:
                certified=bool(sim.dep.certified), robots=robots, mean_spacing=spacing,
                sim_time_s=float(sim.done_t if sim.done_t is not None else sim.t),
                cycles=int(sim.dep.cycle), replacements=displacement_table(rows),
+               along=along_table(along),
                by_step={k: displacement_table([r for r, kk in zip(rows, kinds) if kk == k])
                         for k in sorted(set(kinds))})
     if args.plot and shots:
@@ -215,6 +244,12 @@ def run(config: str, seed: int, timeout: float, args) -> dict:
         print("    by step: " + ", ".join(
             f"{k} {v['n']} x {100 * v['mean']:.1f} cm" for k, v in out["by_step"].items()),
               flush=True)
+        al = out["along"]
+        if al.get("n"):
+            print(f"    along the move: {al['n']} at {100 * al['mean']:+.2f} cm (median "
+                  f"{100 * al['p50']:+.2f}; negative: short); by landmarks " + ", ".join(
+                      f"{k}: {100 * v['mean']:+.2f}" for k, v in al["by_landmarks"].items()),
+                  flush=True)
     return out
 
 

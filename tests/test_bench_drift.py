@@ -9,7 +9,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.drift import displacement_table  # noqa: E402
+from bench.drift import along_table, displacement_table  # noqa: E402
 
 
 def test_displacements_are_summed_by_landmark_count_with_four_and_more_pooled():
@@ -27,3 +27,12 @@ def test_displacements_are_summed_by_landmark_count_with_four_and_more_pooled():
 
 def test_no_replacement_gives_an_empty_summary():
     assert displacement_table([]) == {"n": 0}
+
+
+def test_the_signed_miss_keeps_its_sign_so_a_bias_to_one_side_shows():
+    rows = [(2, -0.004), (2, -0.006), (3, 0.001), (5, -0.002), (4, 0.0)]
+    t = along_table(rows)
+    assert t["n"] == 5 and t["mean"] == pytest.approx(-0.011 / 5) and t["p50"] == -0.002
+    assert t["by_landmarks"]["2"] == {"n": 2, "mean": pytest.approx(-0.005)}
+    assert t["by_landmarks"]["4+"]["mean"] == pytest.approx(-0.001)
+    assert along_table([]) == {"n": 0}
