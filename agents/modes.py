@@ -215,7 +215,7 @@ class Keep(ModeState):
                 self.station = True
                 self.stop = StopRule(p.arrive, p.arrive_ticks, p.error_alpha)
                 ux, uy = homing_velocity({l: see.seen[l] for l in valid}, target, p.v_max,
-                                         p.knee, psi)
+                                         p.g0, psi)
                 return Tick(ux, uy)
         # still: adopt new neighbours and re-record moved ones once they are steady (a
         # landmark within the deadband of its target needs neither: checked first, cheaply)
@@ -247,7 +247,7 @@ class Keep(ModeState):
             self.station = False
             self.window = {}
             return Tick()
-        ux, uy = homing_velocity({l: vis[l] for l in valid}, target, p.v_max, p.knee, psi)
+        ux, uy = homing_velocity({l: vis[l] for l in valid}, target, p.v_max, p.g0, psi)
         return Tick(ux, uy)
 
 
@@ -327,5 +327,5 @@ class Home(ModeState):
                 # met: the robot is as near as these bearings tell, not stalled
                 return Tick(progress=progress, outcome=Outcome.ARRIVED)
             return Tick(progress=progress, outcome=Outcome.STALLED)
-        ux, uy = homing_velocity(vis, goal, p.v_max, p.knee, psi)
+        ux, uy = homing_velocity(vis, goal, p.v_max, p.g0, psi)
         return Tick(ux, uy, progress=progress)

@@ -34,9 +34,7 @@ class AgentParams:
     # homing (spec 4.5)
     g0: float = 0.15                 # gain saturation knee: K = v_max / max(|g|, g0). 0.3 ->
                                      # 0.15: moves settle sooner, and stop 0.04 cm short of
-                                     # their vertex on average, not 0.28 (drift to the source)
-    g0_diffdrive: float = 0.3        # the knee for differential-drive robots (live twins): a
-                                     # sharper one swings their unicycle arcs wider
+                                     # their vertex on average along their way, not 0.28
     arrive_deg: float = 1.5          # stop when every filtered bearing error < this ...
     arrive_ticks: int = 10           # ... for this many consecutive ticks
     arrive_offset: bool = True       # ... and so does the offset they put the robot at (x
@@ -118,11 +116,6 @@ class AgentParams:
         return math.radians(self.sweep_press_deg)
 
     @property
-    def knee(self) -> float:
-        """The homing gain's knee for this robot's kind: g0, or g0_diffdrive (rad)."""
-        return self.g0_diffdrive if self.kind == "diffdrive" else self.g0
-
-    @property
     def aligned(self) -> bool:
         """Whether to estimate frame rotation from mutual bearings (rotating robots)."""
         return self.align == "on" or (self.align == "auto" and self.kind == "diffdrive")
@@ -134,7 +127,7 @@ class AgentParams:
 _FIELDS = {f.name: f for f in dataclasses.fields(AgentParams)}
 # owned by other sections of the run config, not settable from [agent]
 _NOT_IN_AGENT = {"kind", "v_max", "w_max", "radius", "rv", "n_touch", "dt"}
-_POSITIVE = {"v_max", "w_max", "rv", "dt", "g0", "g0_diffdrive", "arrive_deg", "lost_timeout_s",
+_POSITIVE = {"v_max", "w_max", "rv", "dt", "g0", "arrive_deg", "lost_timeout_s",
              "hold_deadband_deg", "hold_second_deg", "hold_gate_deg", "deploy_speed_frac", "test_drive_speed_frac",
              "scale_speed_frac", "scale_step_rv", "scale_max_rv", "blocked_s",
              "stall_s", "stall_deg",

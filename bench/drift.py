@@ -48,6 +48,19 @@ sys.path.insert(0, str(ROOT))
 from bench.common import run_configs  # noqa: E402
 
 
+def _by_landmarks(D: np.ndarray) -> dict:
+    """D: rows (landmarks of the move, value) -> per landmark count (4 and more pooled):
+    n, mean of the value and its share of the values' sum."""
+    tot = float(D[:, 1].sum()) or 1.0
+    by = {}
+    for k in (1, 2, 3, 4):
+        m = D[(D[:, 0] == k) if k < 4 else (D[:, 0] >= 4), 1]
+        if len(m):
+            by["4+" if k == 4 else str(k)] = dict(n=int(len(m)), mean=float(m.mean()),
+                                                  share=float(m.sum() / tot))
+    return by
+
+
 def displacement_table(rows: list[tuple[int, float]]) -> dict:
     """rows: (landmarks of the move, displacement m) -> summary: n, mean, p50/p90/p99 (m),
     and per landmark count (4 and more pooled) n, mean (m) and share of the total."""
@@ -55,16 +68,9 @@ def displacement_table(rows: list[tuple[int, float]]) -> dict:
         return dict(n=0)
     D = np.asarray(rows, float).reshape(-1, 2)
     d = D[:, 1]
-    tot = float(d.sum()) or 1.0
-    by = {}
-    for k in (1, 2, 3, 4):
-        m = d[(D[:, 0] == k) if k < 4 else (D[:, 0] >= 4)]
-        if len(m):
-            by["4+" if k == 4 else str(k)] = dict(n=int(len(m)), mean=float(m.mean()),
-                                                  share=float(m.sum() / tot))
     return dict(n=int(len(d)), mean=float(d.mean()), p50=float(np.percentile(d, 50)),
                 p90=float(np.percentile(d, 90)), p99=float(np.percentile(d, 99)),
-                by_landmarks=by)
+                by_landmarks=_by_landmarks(D))
 
 
 def along_table(rows: list[tuple[int, float]]) -> dict:
@@ -73,11 +79,7 @@ def along_table(rows: list[tuple[int, float]]) -> dict:
     if not rows:
         return dict(n=0)
     D = np.asarray(rows, float).reshape(-1, 2)
-    by = {}
-    for k in (1, 2, 3, 4):
-        m = D[(D[:, 0] == k) if k < 4 else (D[:, 0] >= 4), 1]
-        if len(m):
-            by["4+" if k == 4 else str(k)] = dict(n=int(len(m)), mean=float(m.mean()))
+    by = {k: dict(n=v["n"], mean=v["mean"]) for k, v in _by_landmarks(D).items()}
     return dict(n=int(len(D)), mean=float(D[:, 1].mean()), p50=float(np.median(D[:, 1])),
                 by_landmarks=by)
 

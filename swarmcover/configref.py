@@ -149,7 +149,7 @@ DOCS: dict[str, dict[str, tuple[str, str]]] = {
 _SUFFIX_UNITS = (("_deg", "deg"), ("_hz", "Hz"), ("_s", "s"), ("_rv", "x rv"),
                  ("_frac", "x v_max"), ("_m", "m"), ("_ticks", "ticks"), ("_steps", "steps"),
                  ("_period", "cycles"), ("_cycles", "cycles"))
-_UNITS = {"agent": {"g0": "rad", "g0_diffdrive": "rad", "error_alpha": "-", "hold_window": "ticks", "k_w": "1/s",
+_UNITS = {"agent": {"g0": "rad", "error_alpha": "-", "hold_window": "ticks", "k_w": "1/s",
                     "k_v": "-", "status_every": "ticks", "align": "-", "hold_rehome": "-"},
           "coordinator": {"w_obstacle": "-", "n_touch": "-", "max_paths": "-",
                           "td_retries": "-", "robots_max": "robots", "redundancy_period": "cycles",

@@ -12,7 +12,6 @@ from swarmcover.agents.params import AgentParams, ParamError, from_config, from_
 def test_defaults_match_the_brief():
     p = AgentParams()
     assert (p.v_max, p.g0, p.arrive_deg, p.arrive_ticks, p.lost_timeout_s) == (0.5, 0.15, 1.5, 10, 2.0)
-    assert (p.knee, AgentParams(kind="diffdrive").knee) == (0.15, 0.3)
     assert (p.scale_step_rv, p.test_drive_speed_frac, p.k_w, p.k_v) == (0.02, 0.5, 1.5, 1.0)
     assert abs(p.tau - math.pi / 8) < 1e-12 and not p.aligned
     assert AgentParams(kind="diffdrive").aligned
