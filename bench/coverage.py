@@ -35,6 +35,22 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+def _progress(t0: float, limits: dict, every_s: float = 60.0):
+    """An in-process run's progress on stderr (``SimLoop.run``'s on_cycle), at most once
+    per ``every_s`` of wall time, in the words of ``swarmcover run``'s progress line."""
+    last = [t0]
+
+    def show(sim, cx) -> None:
+        now = time.monotonic()
+        if now - last[0] < every_s:
+            return
+        last[0] = now
+        print(f"  cycle {cx.cycle} | robots {cx.robots}/{limits.get('robots_max', '?')} | "
+              f"frontier {len(cx.frontier)} | obstacle {len(cx.obstacle)} | sim {cx.t:.0f}s | "
+              f"wall {now - t0:.0f}s", file=sys.stderr, flush=True)
+    return show
+
+
 def run_distributed(config: str, seed: int, out: Path, timeout: float) -> dict:
     cmd = [sys.executable, "-m", "swarmcover", "run", config, "--lockstep", "--seed", str(seed),
            "--out", str(out), "--quiet", "--port", str(_free_port()), "--wall-timeout", str(timeout)]
@@ -66,7 +82,7 @@ def run_inproc(config: str, seed: int, timeout: float, overrides: dict | None = 
     cfg, _, limits = default_robots_max(cfg, build_map(cfg), "")  # as `run` does
     sim = SimLoop(cfg, seed=seed, coordinator_overrides=overrides)
     t0 = time.monotonic()
-    res = sim.run(max_sim_s=20_000, max_wall_s=timeout)
+    res = sim.run(max_sim_s=20_000, max_wall_s=timeout, on_cycle=_progress(t0, limits))
     ids = sorted(r for r in res.positions if r in sim.agents)
     truth = Truth(ids=ids, x=[res.positions[r][0] for r in ids],
                   y=[res.positions[r][1] for r in ids], theta=[0.0] * len(ids),

@@ -36,6 +36,25 @@ def test_shipped_configs_load_and_round_trip(name):
     assert again.name == cfg.name and again.sections == cfg.sections
 
 
+@pytest.mark.parametrize("path", sorted((ROOT / "bench" / "configs").glob("*.toml")),
+                         ids=lambda p: p.stem)
+def test_bench_configs_load_and_build_their_maps(path):
+    """The scale benchmarks' configs (not run in the tests: each takes minutes to tens of
+    minutes) stay valid as the config schema changes."""
+    cfg = load_config(path)
+    wm = build_map(cfg)
+    assert cfg.rv == 1.0 and len(wm.sources) >= 1
+
+
+def test_the_stored_office_floor_is_what_its_generator_writes(tmp_path):
+    import subprocess
+    import sys
+    maps = ROOT / "bench" / "configs" / "maps"
+    subprocess.run([sys.executable, str(maps / "make_office.py"), "0", str(tmp_path / "o")],
+                   check=True, capture_output=True, timeout=120)
+    assert (tmp_path / "o.pgm").read_bytes() == (maps / "office_floor.pgm").read_bytes()
+
+
 def test_defaults_and_foreign_sections_kept_raw(tmp_path):
     cfg = load_config(write(tmp_path, BASE + '[coordinator]\nfoo = 1\n[agent]\nbar = {x = 2}\n'))
     assert cfg.world.mode == "lockstep" and cfg.world.dt == 0.05
