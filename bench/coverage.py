@@ -35,19 +35,18 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-def _progress(t0: float, limits: dict, every_s: float = 60.0):
+def _progress(t0: float, robots_max: int, every_s: float = 60.0):
     """An in-process run's progress on stderr (``SimLoop.run``'s on_cycle), at most once
-    per ``every_s`` of wall time, in the words of ``swarmcover run``'s progress line."""
+    per ``every_s`` of wall time, starting as ``swarmcover run``'s progress line does."""
+    from swarmcover.run import cycle_progress
     last = [t0]
 
-    def show(sim, cx) -> None:
+    def show(_sim, cx) -> None:
         now = time.monotonic()
-        if now - last[0] < every_s:
-            return
-        last[0] = now
-        print(f"  cycle {cx.cycle} | robots {cx.robots}/{limits.get('robots_max', '?')} | "
-              f"frontier {len(cx.frontier)} | obstacle {len(cx.obstacle)} | sim {cx.t:.0f}s | "
-              f"wall {now - t0:.0f}s", file=sys.stderr, flush=True)
+        if now - last[0] >= every_s:
+            last[0] = now
+            print(f"  {cycle_progress(cx.cycle, cx, robots_max)} | sim {cx.t:.0f}s | "
+                  f"wall {now - t0:.0f}s", file=sys.stderr, flush=True)
     return show
 
 
@@ -82,7 +81,7 @@ def run_inproc(config: str, seed: int, timeout: float, overrides: dict | None = 
     cfg, _, limits = default_robots_max(cfg, build_map(cfg), "")  # as `run` does
     sim = SimLoop(cfg, seed=seed, coordinator_overrides=overrides)
     t0 = time.monotonic()
-    res = sim.run(max_sim_s=20_000, max_wall_s=timeout, on_cycle=_progress(t0, limits))
+    res = sim.run(max_sim_s=20_000, max_wall_s=timeout, on_cycle=_progress(t0, limits["robots_max"]))
     ids = sorted(r for r in res.positions if r in sim.agents)
     truth = Truth(ids=ids, x=[res.positions[r][0] for r in ids],
                   y=[res.positions[r][1] for r in ids], theta=[0.0] * len(ids),

@@ -331,6 +331,13 @@ def twin_tracking(report: dict) -> dict:
     return out
 
 
+def cycle_progress(cycle: int, cx: Complex, robots_max) -> str:
+    """The start of a run's progress line for one Complex: cycle, robots against the cap,
+    frontier and obstacle edges (``run``'s progress bar, the in-process bench's line)."""
+    return (f"cycle {cycle} | robots {cx.robots}/{robots_max} | frontier {len(cx.frontier)} "
+            f"| obstacle {len(cx.obstacle)}")
+
+
 def default_robots_max(cfg, wmap, resolved: str) -> tuple[object, str, dict]:
     """Without an explicit robots_max ([coordinator] or --robots-max), the cap scales with the
     map: ceil(3 x the Euler lower bound). Returns (cfg, resolved TOML, how it was set)."""
@@ -1016,9 +1023,8 @@ def _supervise(args, cfg, wmap, conf_path, launcher: Launcher, session, keys: Ke
                     cycles_f.flush()
                     waiting = sum(1 for r in available if f"agent-{r}" not in launcher.children)
                     progress.set(total, note=(
-                        f"cycle {total} | robots {cx.robots}/{robots_max} | frontier "
-                        f"{len(cx.frontier)} | obstacle {len(cx.obstacle)} | covered "
-                        f"{100 * coverage:.1f}% | sim {cx.t:.0f}s"
+                        cycle_progress(total, cx, robots_max)
+                        + f" | covered {100 * coverage:.1f}% | sim {cx.t:.0f}s"
                         + (f" | {waiting} joined, no body yet" if waiting else "")
                         + (f" | agents {pool.tally(_local_agents(launcher))}"
                            if pool.capacity else "")))
