@@ -145,15 +145,6 @@ class CoordinatorConfig:
                                    # config seeds 0-2, against false before the settle fix
                                    # (Pushes._claimed_elsewhere): 2,357 -> 2,351 robots,
                                    # 44,295 -> 40,710 s simulated (hall300: README)
-    rolling_pushes: int = 0        # a cycle is no barrier to this many further pushes: each
-                                   # time one of its pushes is over while another still runs,
-                                   # a push from each source is planned on the cycle's
-                                   # snapshot (its occupants as they stand now, the evidence
-                                   # since): through the vertices of pushes that are over,
-                                   # off every running job and off the frontier vertices of
-                                   # pushes over and their neighbours; fed by the source's
-                                   # last push still running. Holonomic swarms only (frames
-                                   # parallel); 0: off
     max_cycles: int = 100000
     final_recheck: bool = True     # after K is empty: redistribute redundant robots, re-certify
 
@@ -209,7 +200,6 @@ _BOUNDS = {
     "scale_correct_period": (1, 10**9),
     "max_paths": (1, 10**6),
     "free_probes_max": (0, 10**6),
-    "rolling_pushes": (0, 10**6),
     "td_retries": (0, 1000),
     "robots_max": (1, 10**6),
     "task_timeout_s": (0.0, 1e9, True),

@@ -214,7 +214,6 @@ class Deployer:
                 self.pending_holds.pop(rid)
         for job in self.jobs:
             self.pushes.advance(job, now)
-        self.pushes.roll_pushes(now)
         self.pushes.roll_free_probes(now)
         carried = self.pushes.carried(self.plan)
         if ((self.pushes.finished or carried is not None) and not self.pending_holds
@@ -499,7 +498,6 @@ class Deployer:
                     robots_in_complex=len(self.placement.members(self.roster)),
                     robots_left=len(self.left),
                     failures=self.failures, failures_healed=self.failures_healed,
-                    test_drive_retries=self.retried, pushes_rolled=self.pushes.rolled,
-                    robots_joined=self.joined,
+                    test_drive_retries=self.retried, robots_joined=self.joined,
                     robots_available=len(self.available),
                     stop_reason=self.stop_reason)

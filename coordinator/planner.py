@@ -408,7 +408,7 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
                 new_vertex: int, scale_correct: bool, test_drive: bool,
                 lattice_spacing: float | None = None,
                 evidence: dict | None = None, skip_probes=frozenset(),
-                sweeps_last: bool = False, done: list[JobSpec] = ()) -> JobSpec | None:
+                sweeps_last: bool = False) -> JobSpec | None:
     """The next-best push from ``start`` within this cycle, after a test drive touched
     (spec 3.4(iv): "choose the next-best frontier"), or None.
 
@@ -419,11 +419,7 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
     frontier vertices, are not used (their occupants are moving or about to), and a lattice
     position keeps clear of their targets. exclude: further vertices no path may use.
     skip_probes: probe keys not to offer (a free probe's retry: those it drove clear).
-    sweeps_last: as plan_cycle's. done: pushes of this cycle that are over (a rolled push,
-    ``[coordinator] rolling_pushes``): their paths may be used again (their robots hold
-    the next vertex now), not their frontier vertices nor those vertices' neighbours (the
-    new robot beyond stands where ``snap`` has no vertex), and a lattice position keeps
-    clear of their targets too.
+    sweeps_last: as plan_cycle's.
     """
     from .topology.paths import plan_pushes
 
@@ -434,15 +430,6 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
     if sweeps_last:
         fence = _placing_first(fence)
     used = set(exclude) | _claimed(cx, [job.path for job in busy])
-    used |= _claimed(cx, [job.path[-1:] for job in done])
-    if done:
-        # the robots placed beyond the frontier vertices of pushes over stand where the
-        # snapshot has no vertex: its frontier within two edges of them is stale
-        near = _claimed(cx, [job.path[-1:] for job in (*busy, *done)])
-        near |= {int(x) for v in list(near) if v in cx for x in cx.neighbours(v)}
-        from dataclasses import replace
-        fence = replace(fence, deployments={f: d for f, d in fence.deployments.items()
-                                            if f not in near or f == start})
     used.discard(start)
     found = plan_pushes(cx, fence, [start], (), params=params, max_paths=1, exclude=used)
     if not found or found[0].frontier in used:
@@ -450,7 +437,7 @@ def replan_push(snap: Snapshot, params: TopologyParams, *, start: int, busy: lis
     spec = _job_spec(snap, params, found[0], new_vertex, test_drive, scale_correct)
     if lattice_spacing:
         _place_on_lattice(snap, [spec], float(lattice_spacing), params, test_drive_failures,
-                          fixed=[*busy, *done])
+                          fixed=busy)
     return spec
 
 

@@ -10,7 +10,6 @@ reads the :class:`coordinator.roster.Roster`, books occupancy in the
 """
 from __future__ import annotations
 
-import dataclasses
 import logging
 
 from swarmcover.bus.messages import Status, Task, parse_sweep_reason, sweep_stoppers
@@ -51,9 +50,6 @@ class Pushes:
         self.tasks: TaskBuilder | None = None
         self._rolled: tuple[int, int] = (-1, -1)   # (cycle, jobs over) last rolled at
         self._carry_at: tuple = (None, False)      # (cycle, probes out), may all stay out
-        self._rolled_pushes: tuple[int, int] = (-1, -1)   # (cycle, pushes over) rolled at
-        self._n_rolled: tuple[int, int] = (-1, 0)  # (cycle, pushes rolled into it)
-        self.rolled = 0                  # pushes started within a running cycle, in all
 
     @property
     def snapshot(self) -> Snapshot | None:
@@ -501,81 +497,6 @@ class Pushes:
             self.jobs.append(make_job(spec, snap.occupant))
             log.info("cycle %d: free probe from vertex %d within the cycle (%s)", self.cycle,
                      spec.path[-1], spec.frontier_edge)
-
-    def roll_pushes(self, now: float) -> None:
-        """Start pushes within the running cycle (``rolling_pushes``): each time one of its
-        pushes is over while another still runs, one more push from each source, planned on
-        the cycle's snapshot with its occupants as they stand now and the evidence since
-        (:func:`coordinator.planner.replan_push` with the pushes over as ``done``). Its
-        path may run through the vertices of pushes that are over (their robots hold the
-        next vertex now), never through a running job's path or frontier neighbourhood nor
-        a frontier vertex of a push over or its neighbours (the robot it placed stands
-        where the snapshot has no vertex). At a source that a running push feeds from, it
-        is fed by that source's last push, as the cycle's own pushes are (``pipeline``).
-        Once a push is rolled the cycle's snapshot holds the occupants as they stand, so
-        its tasks home on the robots there now. Holonomic swarms only: bearings recorded
-        by a vertex's earlier robot are in its frame, parallel to the next one's only when
-        no robot turns. No wall sweeps (free probes take those). The cycle still ends only
-        once every job is over, and only then is anything certified."""
-        snap, cap = self.snapshot, self.cfg.rolling_pushes
-        if cap <= 0 or snap is None or not snap.sources:
-            return
-        pushes = [j for j in self.jobs if not j.spec.free]
-        over = [j for j in pushes if j.finished]
-        running = [j for j in pushes if not j.finished]
-        if (self.cycle, len(over)) == self._rolled_pushes:
-            return
-        self._rolled_pushes = (self.cycle, len(over))
-        n = self._n_rolled[1] if self._n_rolled[0] == self.cycle else 0
-        if (not over or not running or n >= cap
-                or any(k != "holonomic" for k in snap.kinds.values())):
-            return
-        pl = self.placement
-        holder = pl.holders(self.roster)
-        occ = {v: holder.get(v, r) for v, r in snap.occupant.items()}
-        now_snap = dataclasses.replace(snap, occupant=occ)
-        in_motion = self._in_motion(holder)
-        gone = {v for v in snap.occupant if v not in holder} | in_motion
-        busy = [j.spec for j in self.jobs if not j.finished]
-        done = [j.spec for j in over]
-        made = []
-        for s in snap.sources:
-            if n >= cap:
-                break
-            chain = [j for j in running if not j.aborted and j.spec.enter_source is not None
-                     and j.spec.path[0] == s]
-            if any(s in j.spec.path or s in snap.nbrs.get(j.spec.path[-1], {})
-                   for j in self.jobs if not j.finished and j not in chain):
-                continue            # another job moves the source's robot or homes on it
-            if not chain and (s not in holder or s in in_motion):
-                continue
-            spec = replan_push(
-                now_snap, self.params, start=s, busy=busy, exclude=gone - {s},
-                test_drive_failures=drive_failures(self.evidence, now_snap),
-                new_vertex=pl.next_vertex, scale_correct=False, test_drive=self.cfg.test_drive,
-                lattice_spacing=self.cfg.d0 if self.cfg.lattice else None,
-                evidence=evidence_kwargs(self.evidence, now_snap, pl.cut_off),
-                sweeps_last=self.cfg.sweeps_last, done=done)
-            if spec is None or (spec.sweep_far > 0 and self.cfg.free_probes
-                                and self.cfg.sweeps_free):
-                continue
-            pl.next_vertex += 1
-            job = make_job(spec, occ)
-            if chain:
-                job.feed = chain[-1]
-                first = job.steps_at_source()
-                if first is not None:
-                    first.robot = -1         # the robot the source's last push brings in
-            made.append(job)
-            busy.append(spec)
-            n += 1
-            log.info("cycle %d: push rolled into the cycle: %s (%s)", self.cycle, spec.path,
-                     spec.kind)
-        if made:
-            self.snapshot = now_snap
-            self.jobs.extend(made)
-            self.rolled += len(made)
-            self._n_rolled = (self.cycle, n)
 
     # ------------------------------------------------------------------ touches
     def _test_drive_failed(self, job: PushJob, td: Step) -> None:
