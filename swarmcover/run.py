@@ -178,6 +178,13 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)   # each ends a ru
 STOPPING_GATES = ("no_command", "command_stale", "no_mocap", "mocap_stale", "geofence")
 
 
+def _deploy_spacing(cfg) -> float:
+    """d0 (m): the spacing new robots are placed at, rv - eps (``[coordinator] eps_rv``)."""
+    from swarmcover.coordinator.config import CoordinatorConfig
+    return CoordinatorConfig.from_section(dict(cfg.section("coordinator")), rv=cfg.rv,
+                                          where=str(cfg.path)).d0
+
+
 def compute_summary(cfg, wmap, truth: Truth | None, cx: Complex | None, extra: dict) -> dict:
     """Ground-truth numbers for summary.json (world positions, never seen by the swarm).
 
@@ -207,6 +214,10 @@ def compute_summary(cfg, wmap, truth: Truth | None, cx: Complex | None, extra: d
     robots_used = len(members) if members else len(all_alive)
     certified = bool(extra.get("certified", False))
     bound = euler_bound(wmap, rv)["robots"]
+    # the same bound for triangles no larger than the deployment spacing d0 = rv - eps
+    # (the spec's spacing; a swarm that holds it can do no better than this)
+    d0 = extra.get("d0_m") or _deploy_spacing(cfg)
+    bound_d0 = euler_bound(wmap, d0)["robots"]
     sim_t = extra.get("sim_time_s")
     out = dict(
         certified=certified,
@@ -218,6 +229,9 @@ def compute_summary(cfg, wmap, truth: Truth | None, cx: Complex | None, extra: d
         ratio=robots_used / ideal_n if ideal_n and certified else None,
         euler_bound=bound,
         robots_per_bound=robots_used / bound if certified and bound else None,
+        d0_m=d0,
+        euler_bound_d0=bound_d0,
+        robots_per_bound_d0=robots_used / bound_d0 if certified and bound_d0 else None,
         sim_s_per_robot=(sim_t / robots_used if sim_t is not None and robots_used else None),
         mean_spacing=mean_spacing,
     )

@@ -53,6 +53,10 @@ def test_uncertified_summary_has_null_ratios_and_a_stop_reason():
     assert s["stop_reason"] == "wall_timeout" and s["certified"] is False
     assert s["ratio"] is None and s["ratio_same_spacing"] is None and s["robots_per_bound"] is None
     assert s["euler_bound"] == euler_bound(wm, cfg.rv)["robots"] and s["sim_s_per_robot"] == 5.0
+    # the bound at the deployment spacing d0 = rv - eps is higher (smaller triangles)
+    assert s["d0_m"] == pytest.approx(0.9 * cfg.rv)
+    assert s["euler_bound_d0"] == euler_bound(wm, 0.9 * cfg.rv)["robots"] > s["euler_bound"]
+    assert s["robots_per_bound_d0"] is None
     assert s["mean_spacing"] is None and s["false_certificate"] is False
     assert s["inferred_obstacle_edges"] is None  # the coordinator did not send them
     # nothing at all (the world died before a truth arrived) still gives a summary
