@@ -216,7 +216,8 @@ def test_a_room_found_counts_only_while_its_robot_stands_beyond_the_side(placed,
     the side's far side, it does; drifted onto the edge's line (corridor_doors seed 1: the
     vertex a sweep left in a doorway, refilled by a robot that homed on one bearing and
     stopped in the corridor) or gone, it does not: the side stays open and that end's
-    sweep is offered again (its try given back), never closed as 'sweep_gap'."""
+    sweep is offered again (a sweep that found room is no try), never closed as
+    'sweep_gap'."""
     from swarmcover.coordinator.jobs import beyond_side
     cx, ev = _candidate()
     a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
@@ -232,6 +233,31 @@ def test_a_room_found_counts_only_while_its_robot_stands_beyond_the_side(placed,
     else:
         assert side.reason != "probe_clear" and side.reason != "sweep_gap"
         assert [d.vertex for d in _sweeps(f)] == [a.vertex]
+
+
+def test_sweeps_that_found_room_never_use_up_an_end_s_tries():
+    """bench/unseen.py seed 7 map 17: before a 0.30 rv door, one end's free sweep found
+    room and came back, then two pushes' sweeps found the door and left their robots
+    there, and neither robot stood beyond the side later; the other end's sweeps touched
+    without joining. Counted as tries, the room-finding sweeps used up that end's, and
+    the side closed as 'sweep_gap' (the room behind certified uncovered). A sweep that
+    found room is no try: that end is offered its sweep again, and the side stays open."""
+    from swarmcover.coordinator.jobs import beyond_side
+    cx, ev = _candidate()
+    a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
+    ev.record(b, touched=False, returned=True)     # a free probe's: room, came back
+    ev.record(b, touched=False, placed=3)
+    ev.record(b, touched=False, placed=4)
+    for _ in range(TopologyParams().sweep_tries):
+        ev.record(a, touched=True)                 # touched, joined nothing
+    # the rooms' robots are gone (vertices 3 and 4 are not in the snapshot)
+    snap = Snapshot(occupant={i: 10 + i for i in range(3)},
+                    nbrs={i: _nbrs(TRI, i) for i in range(3)})
+    f = detect_fence(cx, **ev.fence_kwargs(snap.occupant, beyond_side(snap)))
+    e, side = _side(f, cx)
+    assert side.reason not in ("sweep_gap", "probe_clear") and e not in f.obstacle.tolist()
+    assert [d.vertex for d in _sweeps(f)] == [b.vertex]
+    assert ev.sweep_tries() == {(0, 1, a.sigma, 0.0): TopologyParams().sweep_tries}
 
 
 def test_a_touch_that_could_not_sweep_counts_a_try_but_joins_nothing():
