@@ -216,8 +216,7 @@ def test_a_room_found_counts_only_while_its_robot_stands_beyond_the_side(placed,
     the side's far side, it does; drifted onto the edge's line (corridor_doors seed 1: the
     vertex a sweep left in a doorway, refilled by a robot that homed on one bearing and
     stopped in the corridor) or gone, it does not: the side stays open and that end's
-    sweep is offered again (a sweep that found room is no try), never closed as
-    'sweep_gap'."""
+    sweep is offered again (its try given back), never closed as 'sweep_gap'."""
     from swarmcover.coordinator.jobs import beyond_side
     cx, ev = _candidate()
     a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
@@ -235,29 +234,47 @@ def test_a_room_found_counts_only_while_its_robot_stands_beyond_the_side(placed,
         assert [d.vertex for d in _sweeps(f)] == [a.vertex]
 
 
-def test_sweeps_that_found_room_never_use_up_an_end_s_tries():
+@pytest.mark.parametrize("held", [False, True])
+def test_no_inference_closes_a_side_a_sweep_found_room_at(held):
     """bench/unseen.py seed 7 map 17: before a 0.30 rv door, one end's free sweep found
     room and came back, then two pushes' sweeps found the door and left their robots
-    there, and neither robot stood beyond the side later; the other end's sweeps touched
-    without joining. Counted as tries, the room-finding sweeps used up that end's, and
-    the side closed as 'sweep_gap' (the room behind certified uncovered). A sweep that
-    found room is no try: that end is offered its sweep again, and the side stays open."""
+    there, and later neither stood beyond the side; the other end's sweeps, sent with no
+    landmark to sweep on, touched and joined nothing. With both ends' tries used up the side closed as
+    'sweep_gap', and the room behind certified uncovered. A side a sweep found room at is
+    never closed as 'sweep_gap': unless a robot holds that room (then 'probe_clear', as
+    before) it is probed by the probe rule once its sweeps are over."""
     from swarmcover.coordinator.jobs import beyond_side
     cx, ev = _candidate()
     a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
     ev.record(b, touched=False, returned=True)     # a free probe's: room, came back
-    ev.record(b, touched=False, placed=3)
+    ev.record(b, touched=False, placed=3)          # pushes': their robots stay at 3, then 4
     ev.record(b, touched=False, placed=4)
     for _ in range(TopologyParams().sweep_tries):
         ev.record(a, touched=True)                 # touched, joined nothing
-    # the rooms' robots are gone (vertices 3 and 4 are not in the snapshot)
-    snap = Snapshot(occupant={i: 10 + i for i in range(3)},
-                    nbrs={i: _nbrs(TRI, i) for i in range(3)})
+    # vertex 3 is gone; 4 stands beyond the side (held) or on the edge's line
+    P = [tuple(p) for p in TRI] + [(S / 2, 0.5), (S / 2, -0.4) if held else (S / 2, 0.02)]
+    snap = Snapshot(occupant={0: 10, 1: 11, 2: 12, 4: 14},
+                    nbrs={i: {j: b for j, b in _nbrs(P, i).items() if j != 3}
+                          for i in (0, 1, 2, 4)})
     f = detect_fence(cx, **ev.fence_kwargs(snap.occupant, beyond_side(snap)))
     e, side = _side(f, cx)
-    assert side.reason not in ("sweep_gap", "probe_clear") and e not in f.obstacle.tolist()
-    assert [d.vertex for d in _sweeps(f)] == [b.vertex]
-    assert ev.sweep_tries() == {(0, 1, a.sigma, 0.0): TopologyParams().sweep_tries}
+    if held:
+        assert side.reason == "probe_clear"
+        return
+    assert side.kind == "frontier" and e not in f.obstacle.tolist()
+    assert e not in [int(k) for k, _ in f.inferred]
+    probes = [d for lst in f.deployments.values() for d in lst
+              if d.kind == "probe" and d.edge == (0, 1)]
+    assert probes and all(0.0 < d.via_frac < 1.0 for d in probes) and not _sweeps(f)
+    # a probe line that finds nothing but walls closes it on evidence ('probes')
+    for _ in range(4):
+        f = detect_fence(cx, **ev.fence_kwargs(snap.occupant, beyond_side(snap)))
+        todo = [d for lst in f.deployments.values() for d in lst
+                if d.kind == "probe" and d.edge == (0, 1)]
+        for d in todo:
+            ev.record(d, touched=True, contact_offset=0.0)
+    e, side = _side(f, cx)
+    assert side.reason == "probes" and e in f.obstacle.tolist()
 
 
 def test_a_touch_that_could_not_sweep_counts_a_try_but_joins_nothing():

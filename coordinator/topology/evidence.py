@@ -243,6 +243,7 @@ class Evidence:
         self._swept: dict[SideKey, list[tuple[float, float]]] = {}
         self._sweep_tries: dict[ProbeKey, int] = {}
         self._sweep_by: dict[SideKey, set[int]] = {}   # side -> robot ids that stopped sweeps
+        self._sweep_room: set[SideKey] = set()          # sides a sweep of which found room
 
     # ---------------------------------------------------------------- recording
     def record(self, dep, touched: bool, *, direction: float | None = None,
@@ -318,36 +319,30 @@ class Evidence:
     UNREACHED_LIMIT = 2
 
     def _record_sweep(self, rec: DriveRecord, returned: bool, placed: int | None = None) -> None:
-        """A wall sweep's outcome: the interval it joined and its end's try, or room found.
-
-        Only a sweep that touched is a try: once an end's tries are used up and a gap is
-        left, the side closes as the inference 'sweep_gap', which presumes that the wall
-        goes on where the sweeps stopped short. A sweep that drove clear found room there
-        (its robot stays, or a free probe's comes back), the opposite of that. Counted as
-        a try, two such sweeps whose robots did not stay beyond the side closed the side
-        before a 0.30 rv door as 'sweep_gap' (bench/unseen.py seed 7 maps 3 and 17: the
-        room behind it certified uncovered)."""
+        """A wall sweep's outcome: its end's try, the interval it joined, or room found."""
         key = probe_key(rec.vertex, rec.edge, rec.sigma, 0.0)
+        self._sweep_tries[key] = self._sweep_tries.get(key, 0) + 1
         if rec.touched:
-            self._sweep_tries[key] = self._sweep_tries.get(key, 0) + 1
             self.add_failed_direction(rec.vertex, rec.direction)
             if rec.swept is not None:
                 u, v = rec.edge
                 self._swept.setdefault((u, v, rec.sigma), []).append(
                     sweep_interval(rec.vertex, rec.edge, *rec.swept))
-        elif returned:
-            self._returned.add(key)
         else:
-            self._clear.add(key)
-            if placed is not None:
-                self._room_at[key] = int(placed)
+            self._sweep_room.add((*rec.edge, rec.sigma))
+            if returned:
+                self._returned.add(key)
+            else:
+                self._clear.add(key)
+                if placed is not None:
+                    self._room_at[key] = int(placed)
 
     def lost_rooms(self, beyond: Callable[[ProbeKey, int], bool]) -> frozenset[ProbeKey]:
         """Clear probes and sweeps whose robot no longer stands beyond their side:
         ``beyond(key, vertex)`` says whether the vertex the drive's robot stayed at is seen
         from the side's ends on that side (coordinator.jobs.beyond_side). Such a drive is
-        no evidence (:meth:`fence_kwargs`; a sweep that found room was never a try): the
-        inference 'probe_clear' rests on a robot standing in the room the drive found. Without this,
+        no evidence, and its try is given back (:meth:`fence_kwargs`): the inference
+        'probe_clear' rests on a robot standing in the room the drive found. Without this,
         corridor_doors seed 1 certified 85% coverage: a sweep's robot stood in a doorway,
         the robots after it drifted back into the corridor, and the side before the door
         stayed closed."""
@@ -412,9 +407,8 @@ class Evidence:
                 if present is None or (k[0] in present and k[1] in present)}
 
     def sweep_tries(self, present: Container[int] | None = None) -> dict[ProbeKey, int]:
-        """(u, v, sigma, end fraction 0 or 1) -> sweeps driven from that end that touched
-        (joined a part of the side or stopped short; one that found room is no try):
-        detect_fence's ``sweep_tries``."""
+        """(u, v, sigma, end fraction 0 or 1) -> sweeps driven from that end (whatever they
+        found): detect_fence's ``sweep_tries``."""
         return {k: n for k, n in self._sweep_tries.items()
                 if present is None or (k[0] in present and k[1] in present)}
 
@@ -425,14 +419,25 @@ class Evidence:
         return {k: frozenset(r) for k, r in self._sweep_by.items()
                 if present is None or (k[0] in present and k[1] in present)}
 
+    def sweep_rooms(self, present: Container[int] | None = None) -> frozenset[SideKey]:
+        """Sides (u, v, sigma) a wall sweep of which drove clear: it found room (an opening,
+        or its wall receded), whether its robot stayed there or, a free probe's, came back.
+        Their gaps are never closed as the inference 'sweep_gap' (detect_fence's
+        ``sweep_room``): that inference presumes the wall goes on where the sweeps stopped
+        short, and a sweep that found room says otherwise."""
+        return frozenset(k for k in self._sweep_room
+                         if present is None or (k[0] in present and k[1] in present))
+
     def fence_kwargs(self, present: Container[int] | None = None,
                      beyond: Callable[[ProbeKey, int], bool] | None = None) -> dict:
         """Keyword arguments for detect_fence: test_drive_failures, probe_failures,
-        probe_offsets, tilt_failures, probe_clear, probe_unreachable, probe_fracs, sweeps
-        and sweep_tries (restricted to nodes in ``present`` when given; with ``beyond``,
-        less the :meth:`lost_rooms`)."""
+        probe_offsets, tilt_failures, probe_clear, probe_unreachable, probe_fracs, sweeps,
+        sweep_tries and sweep_room (restricted to nodes in ``present`` when given; with ``beyond``,
+        less the :meth:`lost_rooms` and their tries)."""
         lost = self.lost_rooms(beyond) if beyond is not None else frozenset()
         tries = self.sweep_tries(present)
+        for k in lost & tries.keys():
+            tries[k] = max(0, tries[k] - 1)
         return dict(test_drive_failures=self.failed_directions(present),
                     probe_failures=self.failed_probes(present),
                     probe_offsets=self.probe_offsets(present),
@@ -441,7 +446,8 @@ class Evidence:
                     probe_unreachable=self.unreachable_probes(present),
                     probe_fracs=self.fractions,
                     sweeps=self.sweeps(present),
-                    sweep_tries=tries)
+                    sweep_tries=tries,
+                    sweep_room=self.sweep_rooms(present))
 
     def merge_failures(self, failures: Mapping[int, list[float]]) -> None:
         """Adopt failed directions kept elsewhere (e.g. a restarted coordinator)."""
