@@ -177,6 +177,23 @@ def test_no_inference_closes_a_gap_a_cut_off_robot_stopped_the_sweeps_at(case, i
         probes = [d for lst in f.deployments.values() for d in lst
                   if d.kind == "probe" and d.edge == (0, 1)]
         assert probes and all(0.0 < d.via_frac < 1.0 for d in probes)
+        # every probe line touched: still open, nothing left to drive, while the robot that
+        # stopped the sweeps is cut off (bench/unseen.py seed 7 map 3: it stood in a door
+        # at the side's end, where no probe line goes)
+        for _ in range(4):
+            f = detect_fence(cx, test_drive_failures=ev.failed_directions(),
+                             **evidence_kwargs(ev, snap, cut_off))
+            for d in [d for lst in f.deployments.values() for d in lst
+                      if d.kind == "probe" and d.edge == (0, 1)]:
+                ev.record(d, touched=True, contact_offset=0.0)
+        e, side = _side(f, cx)
+        assert side.kind == "frontier" and e not in f.obstacle.tolist()
+        assert not [d for lst in f.deployments.values() for d in lst if d.edge == (0, 1)]
+        # once no robot cut off stopped them (it linked again), the probes close it
+        f = detect_fence(cx, test_drive_failures=ev.failed_directions(),
+                         **evidence_kwargs(ev, _tri_snap(cut=False)))
+        e, side = _side(f, cx)
+        assert e in f.obstacle.tolist() and side.reason in ("probes", "sweep_gap")
 
 
 def test_sweeps_that_joined_close_on_evidence_whoever_stopped_them():

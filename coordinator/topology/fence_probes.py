@@ -274,7 +274,10 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
     a side of an edge with a triangle (one open side in ``open_sides``) is swept
     (:func:`_side_sweeps`); a dangling edge's sides are probed, and so is a side whose
     sweeps are over with a gap left when a robot cut off from the swarm stopped one
-    (``ev.foreign``), or when one found room and no robot holds it (``ev.room``)."""
+    (``ev.foreign``), or when one found room and no robot holds it (``ev.room``). A side
+    probed for ``ev.foreign`` closes only as 'probe_clear' (a probe's robot holds the room
+    it found); else it stays frontier, with nothing to drive once its probes are over,
+    until no robot cut off stopped its sweeps."""
     marks = dict(marks)
     probing: dict[tuple[int, int], list[Deployment]] = {}
     for e, sg in sorted(ends):
@@ -298,10 +301,19 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
             key = _side_key(cx, e, sg)
             sweep = (bool(inner) or (n_open == 0 and n_clear == 0)
                      or (key not in ev.foreign and (key not in ev.room or n_clear > 0)))
+        # probed because a robot cut off from the swarm stopped its sweeps: that robot
+        # stands in free space the complex does not hold, in or beyond the gap, and a probe
+        # finding room there stays; but the probes' touches close nothing while it is cut
+        # off. A door at the side's end (where no probe line goes) that it stands in was
+        # certified uncovered that way: bench/unseen.py seed 7 map 3, the robot of a free
+        # sweep that found the door and could not home back, left standing in it
+        held_open = not sweep and _side_key(cx, e, sg) in ev.foreign
         if not sweep:
             inner, n_open, n_clear = _side_probes(cx, L, P, room, ev, e, sg)
         if inner:
             probing[(e, sg)] = sorted(inner, key=lambda d: d.via_frac)
+        elif held_open and not (n_clear and P.clear_infers):
+            probing[(e, sg)] = []          # frontier, nothing to drive: no certificate yet
         elif n_open == 0 and n_clear == 0:
             marks[(e, sg)] = "probes"         # every probe touched: closed on evidence
         elif sweep and n_clear == 0:
