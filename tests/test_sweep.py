@@ -256,10 +256,12 @@ def test_no_inference_closes_a_side_a_sweep_found_room_at(held):
     """bench/unseen.py seed 7 map 17: before a 0.30 rv door, one end's free sweep found
     room and came back, then two pushes' sweeps found the door and left their robots
     there, and later neither stood beyond the side; the other end's sweeps, sent with no
-    landmark to sweep on, touched and joined nothing. With both ends' tries used up the side closed as
-    'sweep_gap', and the room behind certified uncovered. A side a sweep found room at is
-    never closed as 'sweep_gap': unless a robot holds that room (then 'probe_clear', as
-    before) it is probed by the probe rule once its sweeps are over."""
+    landmark to sweep on, touched and joined nothing. Only the last robot's try was given
+    back, both ends' tries were used up, the side closed as 'sweep_gap', and the room
+    behind certified uncovered. Now a lost room gives back the tries of every sweep whose
+    robot stayed, and a side whose room is lost closes only as 'probe_clear' (a robot
+    holds a room found there): never 'sweep_gap', nor on probes that touched, which pass
+    nowhere near the side's ends."""
     from swarmcover.coordinator.jobs import beyond_side
     cx, ev = _candidate()
     a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
@@ -273,25 +275,31 @@ def test_no_inference_closes_a_side_a_sweep_found_room_at(held):
     snap = Snapshot(occupant={0: 10, 1: 11, 2: 12, 4: 14},
                     nbrs={i: {j: b for j, b in _nbrs(P, i).items() if j != 3}
                           for i in (0, 1, 2, 4)})
-    f = detect_fence(cx, **ev.fence_kwargs(snap.occupant, beyond_side(snap)))
+
+    def fence():
+        return detect_fence(cx, **ev.fence_kwargs(snap.occupant, beyond_side(snap)))
+    f = fence()
     e, side = _side(f, cx)
     if held:
         assert side.reason == "probe_clear"
         return
-    assert side.kind == "frontier" and e not in f.obstacle.tolist()
-    assert e not in [int(k) for k, _ in f.inferred]
+    # b's two lost rooms gave their tries back (the free probe's stays): b sweeps again
+    assert side.kind == "frontier" and [d.vertex for d in _sweeps(f)] == [b.vertex]
+    ev.record(_sweeps(f)[0], touched=True)         # ... and this one joins nothing
+    f = fence()
+    e, side = _side(f, cx)
+    assert side.kind == "frontier" and e not in [int(k) for k, _ in f.inferred]
     probes = [d for lst in f.deployments.values() for d in lst
               if d.kind == "probe" and d.edge == (0, 1)]
     assert probes and all(0.0 < d.via_frac < 1.0 for d in probes) and not _sweeps(f)
-    # a probe line that finds nothing but walls closes it on evidence ('probes')
-    for _ in range(4):
-        f = detect_fence(cx, **ev.fence_kwargs(snap.occupant, beyond_side(snap)))
-        todo = [d for lst in f.deployments.values() for d in lst
-                if d.kind == "probe" and d.edge == (0, 1)]
-        for d in todo:
+    for _ in range(4):                             # every probe line touches
+        for d in [d for lst in fence().deployments.values() for d in lst
+                  if d.kind == "probe" and d.edge == (0, 1)]:
             ev.record(d, touched=True, contact_offset=0.0)
+    f = fence()
     e, side = _side(f, cx)
-    assert side.reason == "probes" and e in f.obstacle.tolist()
+    assert side.kind == "frontier" and e not in f.obstacle.tolist()
+    assert not [d for lst in f.deployments.values() for d in lst if d.edge == (0, 1)]
 
 
 def test_a_touch_that_could_not_sweep_counts_a_try_but_joins_nothing():

@@ -243,7 +243,7 @@ class Evidence:
         self._swept: dict[SideKey, list[tuple[float, float]]] = {}
         self._sweep_tries: dict[ProbeKey, int] = {}
         self._sweep_by: dict[SideKey, set[int]] = {}   # side -> robot ids that stopped sweeps
-        self._sweep_room: set[SideKey] = set()          # sides a sweep of which found room
+        self._placed_n: dict[ProbeKey, int] = {}       # sweeps from that end whose robot stayed
 
     # ---------------------------------------------------------------- recording
     def record(self, dep, touched: bool, *, direction: float | None = None,
@@ -328,14 +328,13 @@ class Evidence:
                 u, v = rec.edge
                 self._swept.setdefault((u, v, rec.sigma), []).append(
                     sweep_interval(rec.vertex, rec.edge, *rec.swept))
+        elif returned:
+            self._returned.add(key)
         else:
-            self._sweep_room.add((*rec.edge, rec.sigma))
-            if returned:
-                self._returned.add(key)
-            else:
-                self._clear.add(key)
-                if placed is not None:
-                    self._room_at[key] = int(placed)
+            self._clear.add(key)
+            if placed is not None:
+                self._room_at[key] = int(placed)
+                self._placed_n[key] = self._placed_n.get(key, 0) + 1
 
     def lost_rooms(self, beyond: Callable[[ProbeKey, int], bool]) -> frozenset[ProbeKey]:
         """Clear probes and sweeps whose robot no longer stands beyond their side:
@@ -345,7 +344,9 @@ class Evidence:
         'probe_clear' rests on a robot standing in the room the drive found. Without this,
         corridor_doors seed 1 certified 85% coverage: a sweep's robot stood in a doorway,
         the robots after it drifted back into the corridor, and the side before the door
-        stayed closed."""
+        stayed closed. A lost room gives back the tries of every sweep from its end whose
+        robot stayed (not the last one's only: bench/unseen.py seed 7 map 17, two of them
+        at a 0.30 rv door)."""
         return frozenset(k for k in self._clear
                          if k in self._room_at and not beyond(k, self._room_at[k]))
 
@@ -419,25 +420,23 @@ class Evidence:
         return {k: frozenset(r) for k, r in self._sweep_by.items()
                 if present is None or (k[0] in present and k[1] in present)}
 
-    def sweep_rooms(self, present: Container[int] | None = None) -> frozenset[SideKey]:
-        """Sides (u, v, sigma) a wall sweep of which drove clear: it found room (an opening,
-        or its wall receded), whether its robot stayed there or, a free probe's, came back.
-        Their gaps are never closed as the inference 'sweep_gap' (detect_fence's
-        ``sweep_room``): that inference presumes the wall goes on where the sweeps stopped
-        short, and a sweep that found room says otherwise."""
-        return frozenset(k for k in self._sweep_room
-                         if present is None or (k[0] in present and k[1] in present))
-
     def fence_kwargs(self, present: Container[int] | None = None,
                      beyond: Callable[[ProbeKey, int], bool] | None = None) -> dict:
         """Keyword arguments for detect_fence: test_drive_failures, probe_failures,
         probe_offsets, tilt_failures, probe_clear, probe_unreachable, probe_fracs, sweeps,
         sweep_tries and sweep_room (restricted to nodes in ``present`` when given; with ``beyond``,
-        less the :meth:`lost_rooms` and their tries)."""
+        less the :meth:`lost_rooms` and their tries, and the sides of the sweeps among them
+        as sweep_room)."""
         lost = self.lost_rooms(beyond) if beyond is not None else frozenset()
         tries = self.sweep_tries(present)
+        # sides a wall sweep found room at (an opening, a receding wall) whose robot no
+        # longer stands beyond them: never closed as the inference 'sweep_gap'
+        # (detect_fence's ``sweep_room``), which presumes the wall goes on where the sweeps
+        # stopped short; that sweep found otherwise, and the room is not held
+        rooms = frozenset(k[:3] for k in lost if k[3] in (0.0, 1.0)
+                          and (present is None or (k[0] in present and k[1] in present)))
         for k in lost & tries.keys():
-            tries[k] = max(0, tries[k] - 1)
+            tries[k] = max(0, tries[k] - self._placed_n.get(k, 1))
         return dict(test_drive_failures=self.failed_directions(present),
                     probe_failures=self.failed_probes(present),
                     probe_offsets=self.probe_offsets(present),
@@ -447,7 +446,7 @@ class Evidence:
                     probe_fracs=self.fractions,
                     sweeps=self.sweeps(present),
                     sweep_tries=tries,
-                    sweep_room=self.sweep_rooms(present))
+                    sweep_room=rooms)
 
     def merge_failures(self, failures: Mapping[int, list[float]]) -> None:
         """Adopt failed directions kept elsewhere (e.g. a restarted coordinator)."""

@@ -184,9 +184,10 @@ def detect_fence(
     sweep_tries: (u, v, sigma, 0.0 or 1.0: the end u or v) -> sweeps driven from that end.
     sweep_foreign: sides (u, v, sigma) a sweep of which a robot outside the complex's
       sources' part stopped: their gaps are never closed as the inference 'sweep_gap'.
-    sweep_room: sides (u, v, sigma) a sweep of which found room: unless a robot holds that
-      room (``probe_clear``), their gaps are never closed as 'sweep_gap' either; both kinds
-      are probed by the probe rule once their sweeps are over.
+    sweep_room: sides (u, v, sigma) a sweep of which found room whose robot no longer
+      stands beyond them (evidence.Evidence.lost_rooms): unless another robot holds a room
+      found there (``probe_clear``), their gaps are never closed as 'sweep_gap' either;
+      both kinds are probed by the probe rule once their sweeps are over.
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
       e.g. edges reclassified after a failed test drive in an earlier cycle.
     default_bearing: first deployment direction (rad, body frame) of a robot with no

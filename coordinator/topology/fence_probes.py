@@ -77,7 +77,7 @@ class ProbeEvidence:
     joined (fractions from u, rays -inf / +inf). sweep_tries: (u, v, sigma, 0 or 1) ->
     sweeps driven from that end. foreign: sides (u, v, sigma) one of whose sweeps a robot
     outside the sources' part of the complex stopped. room: sides one of whose sweeps
-    found room.
+    found room that its robot no longer holds.
     """
 
     fracs: tuple
@@ -274,10 +274,10 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
     a side of an edge with a triangle (one open side in ``open_sides``) is swept
     (:func:`_side_sweeps`); a dangling edge's sides are probed, and so is a side whose
     sweeps are over with a gap left when a robot cut off from the swarm stopped one
-    (``ev.foreign``), or when one found room and no robot holds it (``ev.room``). A side
-    probed for ``ev.foreign`` closes only as 'probe_clear' (a probe's robot holds the room
-    it found); else it stays frontier, with nothing to drive once its probes are over,
-    until no robot cut off stopped its sweeps."""
+    (``ev.foreign``), or when one found room and its robot left it (``ev.room``). Such a
+    side closes only as 'probe_clear' (a probe's robot holds the room it found); else it
+    stays frontier, with nothing to drive once its probes are over, until neither holds
+    (the robot links again; a room's robot stands beyond the side again)."""
     marks = dict(marks)
     probing: dict[tuple[int, int], list[Deployment]] = {}
     for e, sg in sorted(ends):
@@ -292,22 +292,23 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
             # the side at every fraction instead: a probe that finds room there stays, seen
             # by that robot, which then links again (closed, the room behind a 0.30 rv door
             # was certified at 54% coverage: bench/unseen.py seed 0 map 8)
-            # The same when a sweep of it found room (an opening, a receding wall) and no
-            # robot stands in that room now: 'sweep_gap' presumes the wall goes on where the
-            # sweeps stopped short, and that sweep says it does not. Closed, the room behind
-            # a 0.30 rv door was certified uncovered twice (bench/unseen.py seed 7 maps 3
-            # and 17: the sweeps' robots did not stay beyond the side, and the other end's
+            # The same when a sweep of it found room (an opening, a receding wall) and its
+            # robot no longer stands in that room: 'sweep_gap' presumes the wall goes on
+            # where the sweeps stopped short, and that sweep says it does not. Closed, the
+            # room behind a 0.30 rv door was certified uncovered (bench/unseen.py seed 7
+            # map 17: the sweeps' robots did not stay beyond the side, and the other end's
             # sweeps, sent with no landmark to sweep on, touched and joined nothing)
             key = _side_key(cx, e, sg)
             sweep = (bool(inner) or (n_open == 0 and n_clear == 0)
                      or (key not in ev.foreign and (key not in ev.room or n_clear > 0)))
-        # probed because a robot cut off from the swarm stopped its sweeps: that robot
-        # stands in free space the complex does not hold, in or beyond the gap, and a probe
-        # finding room there stays; but the probes' touches close nothing while it is cut
-        # off. A door at the side's end (where no probe line goes) that it stands in was
-        # certified uncovered that way: bench/unseen.py seed 7 map 3, the robot of a free
-        # sweep that found the door and could not home back, left standing in it
-        held_open = not sweep and _side_key(cx, e, sg) in ev.foreign
+        # probed because a robot cut off from the swarm stopped its sweeps, or because a
+        # room a sweep found is lost: a probe finding room stays, but the probes' touches
+        # close nothing (no probe line goes near the side's ends, where sweeps find doors).
+        # Closed on them, the room behind a door at the side's end was certified uncovered:
+        # bench/unseen.py seed 7 map 3 (a cut-off robot stood in the door: a free sweep's
+        # that found it and could not home back) and map 17 (the room lost)
+        held_open = not sweep and (_side_key(cx, e, sg) in ev.foreign
+                                   or _side_key(cx, e, sg) in ev.room)
         if not sweep:
             inner, n_open, n_clear = _side_probes(cx, L, P, room, ev, e, sg)
         if inner:
