@@ -142,14 +142,17 @@ BEYOND_MIN = math.radians(10.0)
 
 
 def beyond_side(snap: Snapshot):
-    """``beyond(key, w)`` on ``snap``: the room a drive found beyond side (u, v, sigma) of
-    edge u-v (sigma +1: counter-clockwise of u -> v), whose robot stayed at vertex w, is
-    held: w stands beyond the side (every end that sees both w and the other end sees w
-    on that side, at least BEYOND_MIN off the edge's line, and some end does), or, w gone
-    or drifted, another vertex the ends see does (the swarm went on into that room:
-    bench/unseen.py seed 7 map 17, where the robots beyond a door held it while the one
-    the sweep had left there drifted back)."""
-    def at(u: int, v: int, sg: int, w: int) -> bool:
+    """``beyond(key, w)`` on ``snap``: vertex w stands beyond side (u, v, sigma) of edge
+    u-v (sigma +1: counter-clockwise of u -> v): every end that sees both w and the other
+    end sees w on that side, at least BEYOND_MIN off the edge's line, and some end does;
+    and w is linked to a source (when ``snap`` has sources). A room held by a robot cut off
+    from the swarm is held by nothing the certificate counts."""
+    linked = source_component(snap) if snap.sources else None
+
+    def beyond(key, w: int) -> bool:
+        if linked is not None and w not in linked:
+            return False
+        u, v, sg = int(key[0]), int(key[1]), int(key[2])
         seen = []
         for p, q, s in ((u, v, sg), (v, u, -sg)):
             b = snap.nbrs.get(p, {})
@@ -157,13 +160,6 @@ def beyond_side(snap: Snapshot):
                 a = s * wrap(b[w] - b[q])
                 seen.append(BEYOND_MIN < a < math.pi - BEYOND_MIN)
         return bool(seen) and all(seen)
-
-    def beyond(key, w: int) -> bool:
-        u, v, sg = int(key[0]), int(key[1]), int(key[2])
-        if at(u, v, sg, w):
-            return True
-        near = (set(snap.nbrs.get(u, {})) | set(snap.nbrs.get(v, {}))) - {u, v, w}
-        return any(at(u, v, sg, x) for x in sorted(near))
     return beyond
 
 

@@ -423,18 +423,11 @@ class Evidence:
     def fence_kwargs(self, present: Container[int] | None = None,
                      beyond: Callable[[ProbeKey, int], bool] | None = None) -> dict:
         """Keyword arguments for detect_fence: test_drive_failures, probe_failures,
-        probe_offsets, tilt_failures, probe_clear, probe_unreachable, probe_fracs, sweeps,
-        sweep_tries and sweep_room (restricted to nodes in ``present`` when given; with ``beyond``,
-        less the :meth:`lost_rooms` and their tries, and the sides of the sweeps among them
-        as sweep_room)."""
+        probe_offsets, tilt_failures, probe_clear, probe_unreachable, probe_fracs, sweeps
+        and sweep_tries (restricted to nodes in ``present`` when given; with ``beyond``,
+        less the :meth:`lost_rooms` and their tries)."""
         lost = self.lost_rooms(beyond) if beyond is not None else frozenset()
         tries = self.sweep_tries(present)
-        # sides a wall sweep found room at (an opening, a receding wall) whose robot no
-        # longer stands beyond them: never closed as the inference 'sweep_gap'
-        # (detect_fence's ``sweep_room``), which presumes the wall goes on where the sweeps
-        # stopped short; that sweep found otherwise, and the room is not held
-        rooms = frozenset(k[:3] for k in lost if k[3] in (0.0, 1.0)
-                          and (present is None or (k[0] in present and k[1] in present)))
         for k in lost & tries.keys():
             tries[k] = max(0, tries[k] - self._placed_n.get(k, 1))
         return dict(test_drive_failures=self.failed_directions(present),
@@ -445,8 +438,7 @@ class Evidence:
                     probe_unreachable=self.unreachable_probes(present),
                     probe_fracs=self.fractions,
                     sweeps=self.sweeps(present),
-                    sweep_tries=tries,
-                    sweep_room=rooms)
+                    sweep_tries=tries)
 
     def merge_failures(self, failures: Mapping[int, list[float]]) -> None:
         """Adopt failed directions kept elsewhere (e.g. a restarted coordinator)."""

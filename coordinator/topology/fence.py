@@ -107,7 +107,6 @@ def detect_fence(
     sweeps=None,
     sweep_tries=None,
     sweep_foreign=(),
-    sweep_room=(),
 ) -> Fence:
     """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
 
@@ -184,10 +183,6 @@ def detect_fence(
     sweep_tries: (u, v, sigma, 0.0 or 1.0: the end u or v) -> sweeps driven from that end.
     sweep_foreign: sides (u, v, sigma) a sweep of which a robot outside the complex's
       sources' part stopped: their gaps are never closed as the inference 'sweep_gap'.
-    sweep_room: sides (u, v, sigma) a sweep of which found room whose robot no longer
-      stands beyond them (evidence.Evidence.lost_rooms): unless another robot holds a room
-      found there (``probe_clear``), their gaps are never closed as 'sweep_gap' either;
-      both kinds are probed by the probe rule once their sweeps are over.
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
       e.g. edges reclassified after a failed test drive in an earlier cycle.
     default_bearing: first deployment direction (rad, body frame) of a robot with no
@@ -206,8 +201,7 @@ def detect_fence(
     ends = test_drive_rule(cx, open_sides, room, ends)
     marks = corner_wait_marks(corner_wait, marks, room)
     ev = probe_evidence(probe_failures, probe_fracs, probe_unreachable, probe_clear,
-                        probe_offsets, tilt_failures, sweeps, sweep_tries, sweep_foreign,
-                        sweep_room)
+                        probe_offsets, tilt_failures, sweeps, sweep_tries, sweep_foreign)
     if P.corner_probes:
         marks, ends = corner_candidates(marks, ends, open_sides)
     probing, marks = plan_probes(cx, L, P, room, ev, ends, marks, open_sides)

@@ -76,8 +76,7 @@ class ProbeEvidence:
     node id) given up from that end. sweeps: (u, v, sigma) -> intervals its wall sweeps
     joined (fractions from u, rays -inf / +inf). sweep_tries: (u, v, sigma, 0 or 1) ->
     sweeps driven from that end. foreign: sides (u, v, sigma) one of whose sweeps a robot
-    outside the sources' part of the complex stopped. room: sides one of whose sweeps
-    found room that its robot no longer holds.
+    outside the sources' part of the complex stopped.
     """
 
     fracs: tuple
@@ -89,7 +88,6 @@ class ProbeEvidence:
     sweeps: dict = None
     sweep_tries: dict = None
     foreign: frozenset = frozenset()
-    room: frozenset = frozenset()
 
     def gave_up(self, key, end: int) -> bool:
         return (key, end) in self.unreached
@@ -97,7 +95,7 @@ class ProbeEvidence:
 
 def probe_evidence(probe_failures=(), probe_fracs=None, probe_unreachable=(), probe_clear=(),
                    probe_offsets=None, tilt_failures=(), sweeps=None,
-                   sweep_tries=None, sweep_foreign=(), sweep_room=()) -> ProbeEvidence:
+                   sweep_tries=None, sweep_foreign=()) -> ProbeEvidence:
     """detect_fence's probe keywords (same names and meaning) as a :class:`ProbeEvidence`;
     the fractions default to ``evidence.probe_fractions()``."""
     fracs = tuple(probe_fracs) if probe_fracs is not None else probe_fractions()
@@ -111,9 +109,8 @@ def probe_evidence(probe_failures=(), probe_fracs=None, probe_unreachable=(), pr
              for k, iv in (sweeps or {}).items()}
     tries = {_key(k): int(n) for k, n in (sweep_tries or {}).items()}
     foreign = frozenset((int(k[0]), int(k[1]), int(k[2])) for k in sweep_foreign)
-    room = frozenset((int(k[0]), int(k[1]), int(k[2])) for k in sweep_room)
     return ProbeEvidence(fracs, frozenset(pfail), poff, tfail, frozenset(pclear),
-                         frozenset(punreach), swept, tries, foreign, room)
+                         frozenset(punreach), swept, tries, foreign)
 
 
 def corner_candidates(marks: Marks, ends: Marks, open_sides: Sides) -> tuple[Marks, Marks]:
@@ -273,11 +270,7 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
     probing with no deployment (the run ends uncertified). With ``TopologyParams.sweep``
     a side of an edge with a triangle (one open side in ``open_sides``) is swept
     (:func:`_side_sweeps`); a dangling edge's sides are probed, and so is a side whose
-    sweeps are over with a gap left when a robot cut off from the swarm stopped one
-    (``ev.foreign``), or when one found room and its robot left it (``ev.room``). Such a
-    side closes only as 'probe_clear' (a probe's robot holds the room it found); else it
-    stays frontier, with nothing to drive once its probes are over, until neither holds
-    (the robot links again; a room's robot stands beyond the side again)."""
+    sweeps are over when a robot cut off from the swarm stopped one (``ev.foreign``)."""
     marks = dict(marks)
     probing: dict[tuple[int, int], list[Deployment]] = {}
     for e, sg in sorted(ends):
@@ -292,29 +285,12 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
             # the side at every fraction instead: a probe that finds room there stays, seen
             # by that robot, which then links again (closed, the room behind a 0.30 rv door
             # was certified at 54% coverage: bench/unseen.py seed 0 map 8)
-            # The same when a sweep of it found room (an opening, a receding wall) and its
-            # robot no longer stands in that room: 'sweep_gap' presumes the wall goes on
-            # where the sweeps stopped short, and that sweep says it does not. Closed, the
-            # room behind a 0.30 rv door was certified uncovered (bench/unseen.py seed 7
-            # map 17: the sweeps' robots did not stay beyond the side, and the other end's
-            # sweeps, sent with no landmark to sweep on, touched and joined nothing)
-            key = _side_key(cx, e, sg)
             sweep = (bool(inner) or (n_open == 0 and n_clear == 0)
-                     or (key not in ev.foreign and (key not in ev.room or n_clear > 0)))
-        # probed because a robot cut off from the swarm stopped its sweeps, or because a
-        # room a sweep found is lost: a probe finding room stays, but the probes' touches
-        # close nothing (no probe line goes near the side's ends, where sweeps find doors).
-        # Closed on them, the room behind a door at the side's end was certified uncovered:
-        # bench/unseen.py seed 7 map 3 (a cut-off robot stood in the door: a free sweep's
-        # that found it and could not home back) and map 17 (the room lost)
-        held_open = not sweep and (_side_key(cx, e, sg) in ev.foreign
-                                   or _side_key(cx, e, sg) in ev.room)
+                     or _side_key(cx, e, sg) not in ev.foreign)
         if not sweep:
             inner, n_open, n_clear = _side_probes(cx, L, P, room, ev, e, sg)
         if inner:
             probing[(e, sg)] = sorted(inner, key=lambda d: d.via_frac)
-        elif held_open and not (n_clear and P.clear_infers):
-            probing[(e, sg)] = []          # frontier, nothing to drive: no certificate yet
         elif n_open == 0 and n_clear == 0:
             marks[(e, sg)] = "probes"         # every probe touched: closed on evidence
         elif sweep and n_clear == 0:
