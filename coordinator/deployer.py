@@ -337,6 +337,15 @@ class Deployer:
             # edges as they were when it left), nor while robots cut off from every source
             # are still members (linked again or sent away within stray_cycles plans)
             plan.certified = False
+        if plan.certified:
+            tri = self.placement.cut_off_triangle(self.roster)
+            if tri is not None:
+                # robots cut off from every source see one another: they stand where the
+                # complex does not reach, so "covered" cannot be claimed
+                plan.certified = False
+                log.warning("cycle %d: robots %s, cut off from every source, see one "
+                            "another: no certificate while the complex cannot count them",
+                            self.cycle, list(tri))
         self.out.add(PublishComplex(self._complex_msg(plan, now, "running")))
         if self._pending_failures and plan.certified:
             self.failures_healed += self._pending_failures
