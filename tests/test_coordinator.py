@@ -761,3 +761,28 @@ def test_the_robot_refilling_a_door_vertex_homes_on_the_robot_placed_beyond_it()
                                      sources=[0]))
         tb2 = TaskBuilder(dep2.cfg, dep2.params, dep2.roster, dep2.snapshot)
         assert tb2.move([1, 2], 0, {1}, None, beyond=(13, -0.1)).landmarks == want
+
+
+@pytest.mark.parametrize("sees, triangle", [({42: [43, 44], 43: [42, 44], 44: [42, 43]}, True),
+                                            ({42: [43, 44], 43: [42], 44: [42]}, False),
+                                            ({42: [43, 44], 43: [42, 44], 44: [42]}, False)])
+def test_three_cut_off_robots_that_see_one_another_block_the_certificate(sees, triangle):
+    """bench/unseen.py seed 7 map 17: all 24 robots of the room behind a 0.30 rv door were
+    cut off at once and sent away, and the room was certified with the complex covering
+    59% of the map. Robots cut off from every source that see one another (three of them,
+    each pair both ways) stand in free space the complex does not reach: no certificate
+    while they do (Deployer, via Placement.cut_off_triangle). One-way sightings, or a pair,
+    are no such part."""
+    from swarmcover.bus.messages import Status
+    from swarmcover.coordinator.placement import Placement
+    from swarmcover.coordinator.roster import Roster
+    roster = Roster()
+    for rid, ids in sees.items():
+        roster.admit(Status(robot=rid, seq=1, t=1.0, state="idle", vertex=-1, nbr_ids=ids,
+                            nbr_bearings=[0.0] * len(ids)), cycle=1)
+    pl = Placement(1)
+    pl.cut_off = set(sees)
+    assert (pl.cut_off_triangle(roster) == (42, 43, 44)) is triangle
+    if triangle:
+        roster.get(44).dead = True          # a dead robot is no part of anything
+        assert pl.cut_off_triangle(roster) is None
