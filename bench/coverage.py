@@ -101,7 +101,7 @@ SIM_S_PER_ROBOT_MAX = 5.0
 # the targets proposed in issue 19's notes (stop 41 on), where the two above are out of
 # reach: robots against the bound at the deployment spacing d0 (the bound at rv is
 # (rv / d0)^2 ~ 1.23 times lower in the area term, so 1.25 there leaves a swarm at d0 about
-# 2% for its walls and its errors); time against the push's own pace, judged on maps of
+# 1% for its walls and its errors); time against the push's own pace, judged on maps of
 # at least 100 robots (on small maps the walls' sweeps and drives are most of the time)
 PROPOSED_PER_BOUND_D0_MAX = 1.15
 PROPOSED_OVER_FLOOR_MAX = 1.5
