@@ -33,7 +33,7 @@ from swarmcover.bus.messages import Sense, Status, Task
 
 from .control import FrameTracker, circmean, clamp_speed, diffdrive, slide, wrap
 from .modes import MOVING_MODES, Context, Home, Idle, Mode, ModeState, Outcome, Phase, Record, Tick
-from .openloop import Leg, Open, ScaleOut
+from .openloop import Leg, Open, OpenBack, ScaleOut
 from .params import AgentParams
 from .perception import Contact, Perception
 from .sweep import Sweep
@@ -41,6 +41,8 @@ from .sweep import Sweep
 __all__ = ["Behaviour", "Command", "Mode", "MOVING_MODES", "Phase", "STOP", "State", "TaskState"]
 
 PI = math.pi
+# a goto starting at most this long (s) after a sweep's opening backs out of it first
+OPENING_BACK_S = 2.0
 
 
 class State(StrEnum):
@@ -106,6 +108,13 @@ class Behaviour:
         # back before homing on the vertex (two landmarks in line with the vertex fix no
         # point along that line: homing on them alone stops wherever it starts)
         self.via_back: tuple[float, float, float] | None = None
+        # a wall sweep's drive into the opening it found, reversed: (direction, distance,
+        # when it ended). A goto that comes at once (a free probe sent home) with fewer than
+        # two of its landmarks in view backs out along it first: from beyond a door, homing
+        # straight on bearings the door hides failed "lost landmarks" and left the robot in
+        # the door (bench/unseen.py seed 7 map 3: it then stopped the sweeps that would have
+        # found the door, and the room behind was certified uncovered)
+        self.opening_back: tuple[float, float, float] | None = None
         self.touch_offset = 0.0         # test drive: touch sector centre - direction driven (rad)
         self.press = False              # this tick's velocity presses into walls (a sweep)
         self.target: dict[int, float] = {}  # holding: the snapshot kept (rad, its frame)
@@ -331,6 +340,8 @@ class Behaviour:
             case Outcome.BLOCKED if phase is Phase.DEPLOY:
                 self.end_reason = "blocked"
                 self._after_deploy_motion()
+            case Outcome.BLOCKED if phase is Phase.GOTO:   # backing out of an opening
+                self._enter_home(self._task_goal(self.task), Phase.GOTO)
             case Outcome.BLOCKED if phase is Phase.RETURN:
                 self._finish(TaskState.FAILED, f"{self.return_reason} (return: blocked)")
             case Outcome.BLOCKED:    # via (a test leg is never stopped by walls)
@@ -341,6 +352,13 @@ class Behaviour:
             case Outcome.SWEPT:      # the wall swept, no opening: back to the vertex
                 self._sweep_back(mode, r.reason)
             case Outcome.DONE:
+                if r.reason == "opening" and self.p.kind == "holonomic":
+                    if isinstance(mode, Sweep) and mode.into is not None:
+                        self.opening_back = (wrap(mode.into + PI), mode.travelled, self.see.t)
+                    elif isinstance(mode, OpenBack):   # backed out until one was in view
+                        left = mode.out_dist - (self.see.advance - mode.mark)
+                        self.opening_back = (wrap(mode.leg.direction + PI), max(0.0, left),
+                                             self.see.t)
                 self._finish(TaskState.DONE, r.reason)
             case Outcome.GAVE_UP:
                 self._finish(TaskState.FAILED, r.reason)
@@ -393,7 +411,14 @@ class Behaviour:
         elif kind == "goto":
             self._clear_contact()
             self._set_state(State.MOVING)
-            self._enter_home(self._task_goal(task), Phase.GOTO)
+            goal = self._task_goal(task)
+            back, self.opening_back = self.opening_back, None
+            if (back is not None and self.see.t - back[2] <= OPENING_BACK_S
+                    and not task.distance
+                    and sum(1 for l in goal if l in self.see.seen) < min(2, len(goal))):
+                self._enter_open(back[0], back[1], self._return_speed, Phase.GOTO)
+            else:
+                self._enter_home(goal, Phase.GOTO)
         elif kind == "deploy":
             self._clear_contact()
             self._set_state(State.DEPLOYING)
@@ -468,6 +493,8 @@ class Behaviour:
             self._home_back(goal)
         elif phase is Phase.VIA:
             self._start_test_leg()
+        elif phase is Phase.GOTO:     # backed out of an opening: now home
+            self._enter_home(self._task_goal(self.task), Phase.GOTO)
         else:  # test drive completed without a blocking touch
             self._finish(TaskState.DONE)
 
