@@ -555,3 +555,24 @@ def test_status_keeps_a_neighbour_one_frame_missed_until_its_link_is_lost():
     for k in range(3, 3 + p.link_lost_ticks - 1):
         assert 2 in frame(k, [1, 3])
     assert frame(3 + p.link_lost_ticks - 1, [1, 3]) == {1: 0.1, 3: -2.0}   # lost
+
+
+@pytest.mark.parametrize("back", [True, False])
+def test_a_goto_right_after_a_sweep_s_opening_backs_out_of_it_first(back):
+    """bench/unseen.py seed 7 map 3: a free probe's sweep found a door and drove into it;
+    sent home at once, it saw one of its vertex's landmarks through the door and failed
+    "lost landmarks", left standing in the door. A goto that starts right after a sweep's
+    opening, with fewer than two of its landmarks in view, first drives back the way the
+    robot drove into the opening (open loop), then homes."""
+    sim = world(me=(2.2, 0.0, 0.0))               # only landmark 1 within rv (1.5 m)
+    goal = (0.0, 0.0)
+    beh = Behaviour(AgentParams(), ME)
+    beh.step(sim.sense(ME))
+    if back:                                       # as Sweep's DONE "opening" leaves it
+        beh.opening_back = (math.pi, 1.5, beh.see.t)
+    assert beh.on_task(goto_task(sim, goal))
+    run(beh, sim, ME, 1200, until=lambda: beh.task_state in ("done", "failed"))
+    if back:
+        assert beh.task_state == "done" and sim.dist(ME, goal) < 0.05
+    else:
+        assert beh.task_state == "failed" and "lost landmarks" in beh.status()["reason"]
