@@ -141,13 +141,15 @@ def make_job(spec: JobSpec, occupant: dict[int, int]) -> PushJob:
 BEYOND_MIN = math.radians(10.0)
 
 
-def beyond_side(snap: Snapshot):
+def beyond_side(snap: Snapshot, linked: set[int] | None = None):
     """``beyond(key, w)`` on ``snap``: vertex w stands beyond side (u, v, sigma) of edge
     u-v (sigma +1: counter-clockwise of u -> v): every end that sees both w and the other
     end sees w on that side, at least BEYOND_MIN off the edge's line, and some end does;
-    and w is linked to a source (when ``snap`` has sources). A room held by a robot cut off
-    from the swarm is held by nothing the certificate counts."""
-    linked = source_component(snap) if snap.sources else None
+    and w is linked to a source (when ``snap`` has sources; ``linked``: its
+    :func:`source_component`, if the caller has it). A room held by a robot cut off from the
+    swarm is held by nothing the certificate counts."""
+    if linked is None and snap.sources:
+        linked = source_component(snap)
 
     def beyond(key, w: int) -> bool:
         if linked is not None and w not in linked:
@@ -169,12 +171,13 @@ def evidence_kwargs(evidence: Evidence, snap: Snapshot, cut_off=frozenset()) -> 
     room counts only while its robot's vertex stands beyond the side (:func:`beyond_side`).
     ``sweep_foreign``: the sides a sweep of which a robot cut off from the swarm stopped,
     one sent away as such (``cut_off``: robot ids) or one of ``snap`` no source reaches."""
-    kw = evidence.fence_kwargs(snap.occupant, beyond_side(snap))
+    linked = source_component(snap)
+    kw = evidence.fence_kwargs(snap.occupant,
+                               beyond_side(snap, linked if snap.sources else None))
     kw.pop("test_drive_failures")
     # a sweep stopped by a robot cut off from the swarm: it stands in free space the complex
     # does not hold, and no inference may close the gap it left (fence_probes: 'sweep_gap').
     # A robot sent away as redundant stands where the certified complex held it
-    linked = source_component(snap)
     outside = set(cut_off) | {r for v, r in snap.occupant.items() if v not in linked}
     kw["sweep_foreign"] = frozenset(k for k, by in evidence.sweep_stoppers(snap.occupant).items()
                                     if by & outside)

@@ -97,11 +97,12 @@ class Placement:
 
     def cut_off_triangle(self, roster: Roster) -> tuple[int, int, int] | None:
         """Three robots sent away as cut off (alive) that all see one another (their Status,
-        both ways), or None. Such robots stand in free space and cover area together, and no
-        robot of the complex and they see each other both ways (else they would link
-        again, :meth:`rejoin`): a part of the swarm the certificate cannot count. bench/unseen.py seed 7 map 17: the
-        24 robots of the room behind a 0.30 rv door were cut off at once, and the room was
-        certified with the complex covering 59% of the map."""
+        both ways), or None. Such robots stand in free space and cover area together, and
+        none of them sees a robot of the complex that sees it back (else it would link
+        again, :meth:`rejoin`): a part of the swarm the certificate cannot count.
+        bench/unseen.py seed 7 map 17: the 24 robots of the room behind a 0.30 rv door
+        were cut off at once, and the room was certified with the complex covering 59% of
+        the map."""
         live = {}
         for rid in sorted(self.cut_off):
             r = roster.get(rid)
