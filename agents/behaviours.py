@@ -109,11 +109,11 @@ class Behaviour:
         # point along that line: homing on them alone stops wherever it starts)
         self.via_back: tuple[float, float, float] | None = None
         # a wall sweep's drive into the opening it found, reversed: (direction, distance,
-        # when it ended). A goto that comes at once (a free probe sent home) with fewer than
-        # two of its landmarks in view backs out along it first: from beyond a door, homing
-        # straight on bearings the door hides failed "lost landmarks" and left the robot in
-        # the door (bench/unseen.py seed 7 map 3: it then stopped the sweeps that would have
-        # found the door, and the room behind was certified uncovered)
+        # when it ended). A goto that comes at once (a free probe sent home) creeps back
+        # along it while its landmarks in view fix no point (Home's creep): from beyond a
+        # door, homing straight on bearings the door hides failed "lost landmarks" and left
+        # the robot in the door (bench/unseen.py seed 7 map 3: it then stopped the sweeps
+        # that would have found the door, and the room behind was certified uncovered)
         self.opening_back: tuple[float, float, float] | None = None
         self.touch_offset = 0.0         # test drive: touch sector centre - direction driven (rad)
         self.press = False              # this tick's velocity presses into walls (a sweep)
@@ -340,8 +340,6 @@ class Behaviour:
             case Outcome.BLOCKED if phase is Phase.DEPLOY:
                 self.end_reason = "blocked"
                 self._after_deploy_motion()
-            case Outcome.BLOCKED if phase is Phase.GOTO:   # backing out of an opening
-                self._enter_home(self._task_goal(self.task), Phase.GOTO)
             case Outcome.BLOCKED if phase is Phase.RETURN:
                 self._finish(TaskState.FAILED, f"{self.return_reason} (return: blocked)")
             case Outcome.BLOCKED:    # via (a test leg is never stopped by walls)
@@ -373,10 +371,15 @@ class Behaviour:
         self._set_state(State.HOLDING)
         self.target = {}
 
-    def _enter_home(self, goal: dict[int, float], phase: Phase) -> None:
+    def _enter_home(self, goal: dict[int, float], phase: Phase,
+                    creep_dir: float | None = None, creep_dist: float | None = None) -> None:
+        """Home on ``goal``; a goto creeps along the task's direction hint, or along
+        ``creep_dir`` for at most ``creep_dist`` (m) when given (see :class:`Home`)."""
         self.phase = phase
         task = self.task
-        self._mode = Home(goal, phase, self.frame, self.ctx, task.direction, task.distance)
+        self._mode = Home(goal, phase, self.frame, self.ctx,
+                          task.direction if creep_dir is None else creep_dir,
+                          task.distance if creep_dist is None else creep_dist)
 
     @property
     def _return_speed(self) -> float:
@@ -411,14 +414,13 @@ class Behaviour:
         elif kind == "goto":
             self._clear_contact()
             self._set_state(State.MOVING)
-            goal = self._task_goal(task)
             back, self.opening_back = self.opening_back, None
-            if (back is not None and self.see.t - back[2] <= OPENING_BACK_S
-                    and not task.distance
-                    and sum(1 for l in goal if l in self.see.seen) < min(2, len(goal))):
-                self._enter_open(back[0], back[1], self._return_speed, Phase.GOTO)
+            if back is not None and self.see.t - back[2] <= OPENING_BACK_S and not task.distance:
+                # Home's creep hint: out along the drive back while the goal landmarks in
+                # view fix no point, at most as far as the drive went in
+                self._enter_home(self._task_goal(task), Phase.GOTO, back[0], back[1])
             else:
-                self._enter_home(goal, Phase.GOTO)
+                self._enter_home(self._task_goal(task), Phase.GOTO)
         elif kind == "deploy":
             self._clear_contact()
             self._set_state(State.DEPLOYING)
@@ -493,8 +495,6 @@ class Behaviour:
             self._home_back(goal)
         elif phase is Phase.VIA:
             self._start_test_leg()
-        elif phase is Phase.GOTO:     # backed out of an opening: now home
-            self._enter_home(self._task_goal(self.task), Phase.GOTO)
         else:  # test drive completed without a blocking touch
             self._finish(TaskState.DONE)
 

@@ -562,8 +562,8 @@ def test_a_goto_right_after_a_sweep_s_opening_backs_out_of_it_first(back):
     """bench/unseen.py seed 7 map 3: a free probe's sweep found a door and drove into it;
     sent home at once, it saw one of its vertex's landmarks through the door and failed
     "lost landmarks", left standing in the door. A goto that starts right after a sweep's
-    opening, with fewer than two of its landmarks in view, first drives back the way the
-    robot drove into the opening (open loop), then homes."""
+    opening creeps back the way the robot drove into the opening (Home's creep hint) while
+    fewer than two of its landmarks are in view, then homes."""
     sim = world(me=(2.2, 0.0, 0.0))               # only landmark 1 within rv (1.5 m)
     goal = (0.0, 0.0)
     beh = Behaviour(AgentParams(), ME)
