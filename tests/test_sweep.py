@@ -18,7 +18,7 @@ from swarmcover.coordinator import build_complex, detect_fence
 from swarmcover.coordinator.config import CoordinatorConfig
 from swarmcover.coordinator.jobs import make_job
 from swarmcover.coordinator.planner import Snapshot, plan_cycle
-from swarmcover.coordinator.actions import SendTask
+from swarmcover.coordinator.actions import PublishComplex, SendTask
 from swarmcover.coordinator.topology.evidence import Evidence, sweep_gaps, sweep_interval
 from swarmcover.coordinator.topology.params import TopologyParams
 from test_free_probes import _deployer as free_probe_deployer
@@ -622,3 +622,36 @@ def test_free_probes_are_capped_by_free_probes_max_not_by_the_pushes_cap():
     assert len(free(free_max=CoordinatorConfig(free_probes_max=2).free_max)) == 2
     for f in many:
         assert not set(snap.nbrs[f]) & set(many)
+
+
+@pytest.mark.parametrize("room", [True, False])
+def test_the_final_pass_keeps_the_robot_that_holds_a_room(room):
+    """bench/configs/maps/make_office.py --small 3: a sweep found room beside a desk and its
+    robot stayed there, beyond the side. The final redundancy pass sent it away, so the room
+    was lost and the side reopened (a room counts only while its robot stands there); it
+    was swept again, found the same room, and that robot was sent away too: 14 robots sent
+    away over 13 cycles and 115 s after the first certificate. A robot holding a room is
+    not sent away; the other redundant robots are."""
+    from swarmcover.coordinator.deployer import Phase
+    cx, ev = _candidate()
+    a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
+    if room:
+        ev.record(b, touched=False, placed=4)     # its robot stays at 4, beyond the side
+    P = [tuple(p) for p in TRI] + [(S / 2, 0.5), (S / 2, -0.4)]
+    keep = (0, 1, 2, 3, 4)
+    nbrs = {i: {j: x for j, x in _nbrs(P, i).items() if j in keep} for i in keep}
+    snap = Snapshot(occupant={i: 10 + i for i in keep}, nbrs=nbrs, sources=[0])
+    dep, _ = _deployer(snap)
+    dep.evidence = ev
+
+    def planner(s, params, **kw):                 # complete, and 3 and 4 redundant
+        return dataclasses.replace(plan_cycle(s, params, **kw), frontier=[], jobs=[],
+                                   open_vertices=set(), certified=True, redundant={3, 4})
+
+    dep.planner = planner
+    dep.phase, dep.phase_t = Phase.SETTLE, 0.0
+    acts = dep.step(1.0)
+    leave = {a.robot for a in acts if isinstance(a, SendTask) and a.task.kind == "leave"}
+    assert leave == ({13} if room else {13, 14})
+    (cx_msg,) = [a.complex for a in acts if isinstance(a, PublishComplex)]
+    assert cx_msg.certified and cx_msg.redundant == ([3] if room else [3, 4])
