@@ -282,7 +282,8 @@ def main(argv=None) -> int:
                   f"sim={s['sim_time_s']:.0f}s wall={s['wall_time_s']:.0f}s", flush=True)
             for line in check(name, s):
                 print(f"    {line}", flush=True)
-    keys = ("name", "seed", "certified", "stop_reason", "robots_used", "euler_bound",
+    keys = ("name", "seed", "certified", "stop_reason", "robots_used", "robots_spawned",
+            "euler_bound",
             "robots_per_bound", "d0_m", "euler_bound_d0", "robots_per_bound_d0",
             "sim_s_per_robot", "ideal_count", "ratio", "mean_spacing",
             "ideal_count_same_spacing", "ratio_same_spacing", "coverage", "coverage_complex",

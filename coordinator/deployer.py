@@ -27,7 +27,8 @@ from swarmcover.bus.messages import Complex, Remove, Status, Task
 
 from .actions import Action, Done, Outbox, PublishComplex, RemoveRobot
 from .config import CoordinatorConfig
-from .jobs import PushJob, Step, StepName, StepState, drive_failures, evidence_kwargs, make_job
+from .jobs import (PushJob, Step, StepName, StepState, drive_failures, evidence_kwargs,
+                   lone_room_holders, make_job)
 from .placement import SETTLED_STATES, Placement, stray_vertices
 from .planner import CyclePlan, Snapshot, plan_cycle
 from .pushes import Pushes
@@ -316,7 +317,6 @@ class Deployer:
             snap = self._take_snapshot()
         run_redundancy = (self.cycle % max(1, self.cfg.redundancy_period) == 0)
         evidence = evidence_kwargs(self.evidence, snap, self.placement.cut_off)
-        holders = self.evidence.room_holders(evidence["probe_clear"])   # see below
         plan = self.plan = self.planner(
             snap, self.params, cycle=self.cycle,
             redundancy=(run_redundancy or self.final_pass) and not out,
@@ -338,12 +338,9 @@ class Deployer:
             # are still members (linked again or sent away within stray_cycles plans)
             plan.certified = False
         if plan.certified:
-            # a robot holding a room a drive found is no redundant one: the room counts only
-            # while it stands there (Evidence.lost_rooms). The final pass sent such robots
-            # away, the side reopened, was swept again, found the same room, and its robot
-            # was sent away again (bench/configs/maps/make_office.py --small 3: 14 robots
-            # sent away over 13 cycles and 115 s after the first certificate)
-            plan.redundant = set(plan.redundant) - holders
+            # a robot alone holding a room a drive found is no redundant one
+            plan.redundant = set(plan.redundant) - lone_room_holders(
+                self.evidence, snap, evidence["probe_clear"])
             tri = self.placement.cut_off_triangle(self.roster)
             if tri is not None:
                 # robots cut off from every source see one another: they stand where the

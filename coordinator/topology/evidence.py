@@ -350,15 +350,11 @@ class Evidence:
         return frozenset(k for k in self._clear
                          if k in self._room_at and not beyond(k, self._room_at[k]))
 
-    def room_holders(self, clear: Iterable[ProbeKey]) -> frozenset[int]:
-        """The vertices whose robots hold the rooms of the clear probes and sweeps ``clear``
-        (fence_kwargs' ``probe_clear``: those still counted). They are not redundant: a
-        room counts only while its robot stands beyond the side (:meth:`lost_rooms`), so
-        sending one away as redundant reopened its side, and it was swept again, found the
-        same room and its robot sent away again (a small office floor, bench/configs/maps/
-        make_office.py --small 3: 14 robots sent away over the 13 cycles and 115 s after
-        the first certificate)."""
-        return frozenset(self._room_at[k] for k in clear if k in self._room_at)
+    def rooms(self, clear: Iterable[ProbeKey]) -> dict[ProbeKey, int]:
+        """Clear probe or sweep -> the vertex whose robot holds the room it found, for the
+        keys ``clear`` (fence_kwargs' ``probe_clear``: those still counted) that placed a
+        robot (coordinator.jobs.lone_room_holders)."""
+        return {k: self._room_at[k] for k in clear if k in self._room_at}
 
     def add_failed_direction(self, vertex: int, direction: float) -> None:
         """A drive from ``vertex`` along ``direction`` touched (no Deployment at hand)."""
