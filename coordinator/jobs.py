@@ -167,19 +167,22 @@ def beyond_side(snap: Snapshot, linked: set[int] | None = None):
 
 def lone_room_holders(evidence: Evidence, snap: Snapshot, clear) -> frozenset[int]:
     """The vertices of ``snap`` whose robots alone hold a room a drive found (``clear``:
-    the fence's ``probe_clear``): no other vertex beside both ends of the side stands
-    beyond it. Such a robot is no redundant one: the room counts only while it stands
-    there (Evidence.lost_rooms), so sending it away reopens the side. The final pass did,
-    the side was swept again, found the same room, and that robot was sent away in turn
-    (office_ros seed 0: 53 cycles and 514 s after the first certificate, 42 robots more
-    started). A side another robot also stands beyond stays covered without it."""
-    rooms = evidence.rooms(clear)
-    if not rooms:
-        return frozenset()
-    beyond = beyond_side(snap)
+    the fence's ``probe_clear``): no other robot holds a room of the same side, and no
+    other vertex beside both ends of the side stands beyond it. Such a robot is no
+    redundant one: the room counts only while it stands there (Evidence.lost_rooms), so
+    sending it away reopens the side. The final pass did, the side was swept again, found
+    the same room, and that robot was sent away in turn (office_ros seed 0: 53 cycles and
+    514 s after the first certificate, 42 robots more started). A side that another
+    room's robot keeps closed (pillar_hall seed 2: one from each end), or another robot
+    beyond it keeps covered, stays so without it."""
+    rooms = {k: h for k, h in evidence.rooms(clear).items() if h in snap.occupant}
+    holders: dict[tuple, set[int]] = {}
+    for key, h in rooms.items():
+        holders.setdefault(key[:3], set()).add(h)
+    beyond = beyond_side(snap) if rooms else None
     lone = set()
     for key, h in rooms.items():
-        if h not in snap.occupant:
+        if holders[key[:3]] != {h}:
             continue
         u, v = int(key[0]), int(key[1])
         nu, nv = snap.nbrs.get(u, {}), snap.nbrs.get(v, {})

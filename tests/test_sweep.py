@@ -624,21 +624,26 @@ def test_free_probes_are_capped_by_free_probes_max_not_by_the_pushes_cap():
         assert not set(snap.nbrs[f]) & set(many)
 
 
-@pytest.mark.parametrize("room", ["lone", "shared", None])
+@pytest.mark.parametrize("room", ["lone", "shared", "both_ends", None])
 def test_the_final_pass_keeps_the_robot_that_alone_holds_a_room(room):
     """office_ros seed 0: a sweep found room and its robot stayed there, beyond the side.
     The final redundancy pass sent it away, so the room was lost and the side reopened (a
     room counts only while its robot stands there); it was swept again, found the same
     room, and that robot was sent away too: 53 cycles and 514 s after the first
     certificate, 42 robots more started. A robot that alone holds a room is not sent away;
-    one whose side another robot also stands beyond is, as are the other redundant ones."""
+    one whose side another robot also stands beyond ("shared"), or another room's robot
+    keeps closed (pillar_hall seed 2: a room found from each end), is, as are the other
+    redundant ones."""
     from swarmcover.coordinator.deployer import Phase
     cx, ev = _candidate()
     a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
     if room:
         ev.record(b, touched=False, placed=4)     # its robot stays at 4, beyond the side
-    P = [tuple(p) for p in TRI] + [(S / 2, 0.5), (S / 2, -0.4), (S / 2 + 0.2, -0.5)]
-    keep = (0, 1, 2, 3, 4, 5) if room == "shared" else (0, 1, 2, 3, 4)
+    if room == "both_ends":
+        ev.record(a, touched=False, placed=5)     # and a's at 5, beyond it, seen by 0 only
+    P = [tuple(p) for p in TRI] + [(S / 2, 0.5), (S / 2, -0.4),
+                                   (-0.3, -0.5) if room == "both_ends" else (S / 2 + 0.2, -0.5)]
+    keep = (0, 1, 2, 3, 4, 5) if room in ("shared", "both_ends") else (0, 1, 2, 3, 4)
     nbrs = {i: {j: x for j, x in _nbrs(P, i).items() if j in keep} for i in keep}
     snap = Snapshot(occupant={i: 10 + i for i in keep}, nbrs=nbrs, sources=[0])
     dep, _ = _deployer(snap)
