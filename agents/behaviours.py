@@ -354,9 +354,8 @@ class Behaviour:
                     if isinstance(mode, Sweep) and mode.into is not None:
                         self.opening_back = (wrap(mode.into + PI), mode.travelled, self.see.t)
                     elif isinstance(mode, OpenBack):   # backed out until one was in view
-                        left = mode.out_dist - (self.see.advance - mode.mark)
-                        self.opening_back = (wrap(mode.leg.direction + PI), max(0.0, left),
-                                             self.see.t)
+                        self.opening_back = (wrap(mode.leg.direction + PI),
+                                             mode.left(self.see), self.see.t)
                 self._finish(TaskState.DONE, r.reason)
             case Outcome.GAVE_UP:
                 self._finish(TaskState.FAILED, r.reason)

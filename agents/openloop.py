@@ -136,6 +136,10 @@ class OpenBack(ModeState):
         self.reason, self.stay = reason, stay
         self.seen_at: float | None = None   # backed up when one came back into view (m)
 
+    def left(self, see: Perception) -> float:
+        """What is still to reverse of the way driven out (m, >= 0)."""
+        return max(0.0, self.out_dist - (see.advance - self.mark))
+
     def tick(self, ctx: Context) -> Tick:
         see, leg = ctx.see, self.leg
         back = see.advance - self.mark

@@ -176,10 +176,12 @@ def lone_room_holders(evidence: Evidence, snap: Snapshot, clear) -> frozenset[in
     room's robot keeps closed (pillar_hall seed 2: one from each end), or another robot
     beyond it keeps covered, stays so without it."""
     rooms = {k: h for k, h in evidence.rooms(clear).items() if h in snap.occupant}
-    holders: dict[tuple, set[int]] = {}
+    if not rooms:
+        return frozenset()
+    holders: dict[tuple, set[int]] = {}      # side (u, v, sigma) -> its rooms' robots
     for key, h in rooms.items():
         holders.setdefault(key[:3], set()).add(h)
-    beyond = beyond_side(snap) if rooms else None
+    beyond = beyond_side(snap)
     lone = set()
     for key, h in rooms.items():
         if holders[key[:3]] != {h}:
