@@ -84,22 +84,28 @@ def write_config(seed: int, index: int, ros: bool, folder: Path):
     return path, case
 
 
-def run_map(job) -> dict:
-    """One map: write its config, run it in-process, judge it by ground truth."""
-    seed, index, ros, folder, timeout = job
+def judge(config: str, row: dict, timeout: float) -> dict:
+    """Run ``config`` in-process (seed 0) and return ``row`` with the ground truth's
+    verdict on its end (a crash is a result here: the row says which map and why)."""
     from bench.coverage import run_inproc
-    path, case = write_config(seed, index, ros, Path(folder))
-    row = dict(seed=seed, index=index, kind=case.kind, ros=ros, facing_wall=case.facing_wall,
-               door_rv=case.door_w, noise_deg=case.noise_deg, config=str(path))
     t0 = time.monotonic()
     try:
-        s = run_inproc(str(path), 0, timeout)
-    except Exception as e:  # a crash is a result here: the row says which map and why
+        s = run_inproc(config, 0, timeout)
+    except Exception as e:
         return dict(row, error=f"{type(e).__name__}: {e}", wall_s=time.monotonic() - t0)
     keep = ("certified", "stop_reason", "coverage", "coverage_complex", "false_certificate", "uncovered_reachable_m2",
             "false_certificate_where", "robots_used", "euler_bound", "robots_per_bound",
             "sim_time_s", "sim_s_per_robot", "cycles")
     return dict(row, **{k: s.get(k) for k in keep}, wall_s=round(time.monotonic() - t0, 1))
+
+
+def run_map(job) -> dict:
+    """One map: write its config, run it in-process, judge it by ground truth."""
+    seed, index, ros, folder, timeout = job
+    path, case = write_config(seed, index, ros, Path(folder))
+    row = dict(seed=seed, index=index, kind=case.kind, ros=ros, facing_wall=case.facing_wall,
+               door_rv=case.door_w, noise_deg=case.noise_deg, config=str(path))
+    return judge(str(path), row, timeout)
 
 
 def summarise(rows: list[dict]) -> dict:
@@ -118,20 +124,73 @@ def summarise(rows: list[dict]) -> dict:
                 if cert else None)
 
 
-def _line(r: dict) -> str:
-    head = (f"map {r['index']:3d} {r['kind']:9s}{' ros' if r['ros'] else '    '}"
+def _head(r: dict) -> str:
+    return (f"map {r['index']:3d} {r['kind']:9s}{' ros' if r['ros'] else '    '}"
             f" door {r['door_rv'] or 0:.2f} {'facing' if r['facing_wall'] else '      '}")
+
+
+def line(r: dict, head) -> str:
+    """One map's row: ``head(r)`` (what the map is), then the run's verdict."""
     if "error" in r:
-        return f"{head}  ERROR {r['error']}"
+        return f"{head(r)}  ERROR {r['error']}"
     warn = "  FALSE CERTIFICATE at %s" % (r.get("false_certificate_where"),) \
         if r["false_certificate"] else ""
-    return (f"{head}  {'certified' if r['certified'] else r['stop_reason']:<12s}"
+    return (f"{head(r)}  {'certified' if r['certified'] else r['stop_reason']:<12s}"
             f" coverage {100 * r['coverage']:6.2f}%"
             + (f" (complex {100 * r['coverage_complex']:6.2f}%)" if r.get("coverage_complex")
                is not None else "")
             + f"  robots {r['robots_used']:3d}"
             f" / bound {r['euler_bound']}  sim {r['sim_time_s']:7.1f} s"
             f"  wall {r['wall_s']:5.1f} s{warn}")
+
+
+def campaign(ap, a, bench: str, make_jobs, run_map, head) -> int:
+    """Run ``run_map`` on each of ``make_jobs(folder)`` over ``a.jobs`` worker processes
+    (``a.out`` or a temporary folder), a row per map on stderr as it ends, then every row,
+    the summary and one JSON object on stdout; 1 on a false certificate or an error."""
+    for name in ("maps", "jobs"):
+        if getattr(a, name) < 1:
+            ap.error(f"--{name} must be >= 1, got {getattr(a, name)}")
+    if a.start < 0:
+        ap.error("--start must be >= 0")
+    tmp = None
+    if a.out:
+        folder = Path(a.out)
+        folder.mkdir(parents=True, exist_ok=True)
+    else:
+        tmp = tempfile.TemporaryDirectory(prefix=f"{bench}-")
+        folder = Path(tmp.name)
+    jobs = make_jobs(str(folder))
+    rows: list[dict] = []
+    t0 = time.monotonic()
+
+    def took(r):
+        rows.append(r)
+        eprint(f"[{len(rows)}/{len(jobs)} {time.monotonic() - t0:.0f} s] {line(r, head)}")
+
+    if a.jobs > 1:
+        import multiprocessing as mp
+        with mp.get_context("spawn").Pool(a.jobs, maxtasksperchild=1) as pool:
+            for r in pool.imap_unordered(run_map, jobs):
+                took(r)
+    else:
+        for j in jobs:
+            took(run_map(j))
+    rows.sort(key=lambda r: r["index"])
+    for r in rows:
+        print(line(r, head))
+    s = summarise(rows)
+    s["wall_s"] = round(time.monotonic() - t0, 1)
+    print(f"\n{s['certified']} of {s['maps']} certified, {s['false_certificates']} false "
+          f"certificates, {s['errors']} errors; not certified: {s['not_certified'] or 'none'}; "
+          f"robots / Euler bound {s['robots_per_bound_mean'] or math.nan:.2f} on average; "
+          f"wall {s['wall_s']} s")
+    if a.out:
+        (folder / "results.json").write_text(json.dumps({"summary": s, "maps": rows}, indent=1))
+    print(json.dumps({"bench": bench, "seed": a.seed, "summary": s, "maps": rows}))
+    if tmp is not None:
+        tmp.cleanup()
+    return 1 if s["false_certificates"] or s["errors"] else 0
 
 
 def main(argv=None) -> int:
@@ -145,51 +204,11 @@ def main(argv=None) -> int:
     ap.add_argument("--timeout", type=float, default=900.0, help="wall seconds per map")
     ap.add_argument("--out", help="folder for the configs and results.json (default: temporary)")
     a = ap.parse_args(argv)
-    for name in ("maps", "jobs"):
-        if getattr(a, name) < 1:
-            ap.error(f"--{name} must be >= 1, got {getattr(a, name)}")
-    if a.ros < 0 or a.start < 0:
-        ap.error("--ros and --start must be >= 0")
-    tmp = None
-    if a.out:
-        folder = Path(a.out)
-        folder.mkdir(parents=True, exist_ok=True)
-    else:
-        tmp = tempfile.TemporaryDirectory(prefix="unseen-")
-        folder = Path(tmp.name)
-    jobs = [(a.seed, i, bool(a.ros) and i % a.ros == a.ros - 1, str(folder), a.timeout)
-            for i in range(a.start, a.start + a.maps)]
-    rows: list[dict] = []
-    t0 = time.monotonic()
-
-    def took(r):
-        rows.append(r)
-        eprint(f"[{len(rows)}/{len(jobs)} {time.monotonic() - t0:.0f} s] {_line(r)}")
-
-    if a.jobs > 1:
-        import multiprocessing as mp
-        with mp.get_context("spawn").Pool(a.jobs, maxtasksperchild=1) as pool:
-            for r in pool.imap_unordered(run_map, jobs):
-                took(r)
-    else:
-        for j in jobs:
-            took(run_map(j))
-    rows.sort(key=lambda r: r["index"])
-    for r in rows:
-        print(_line(r))
-    s = summarise(rows)
-    s["wall_s"] = round(time.monotonic() - t0, 1)
-    print(f"\n{s['certified']} of {s['maps']} certified, {s['false_certificates']} false "
-          f"certificates, {s['errors']} errors; not certified: {s['not_certified'] or 'none'}; "
-          f"robots / Euler bound {s['robots_per_bound_mean'] or math.nan:.2f} on average; "
-          f"wall {s['wall_s']} s")
-    if a.out:
-        (folder / "results.json").write_text(json.dumps({"summary": s, "maps": rows}, indent=1))
-    print(json.dumps({"bench": "unseen", "seed": a.seed, "summary": s, "maps": rows}))
-    if tmp is not None:
-        tmp.cleanup()
-    return 1 if s["false_certificates"] or s["errors"] else 0
-
+    if a.ros < 0:
+        ap.error("--ros must be >= 0")
+    return campaign(ap, a, "unseen", lambda folder: [
+        (a.seed, i, bool(a.ros) and i % a.ros == a.ros - 1, folder, a.timeout)
+        for i in range(a.start, a.start + a.maps)], run_map, _head)
 
 if __name__ == "__main__":
     sys.exit(main())
