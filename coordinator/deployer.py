@@ -340,7 +340,7 @@ class Deployer:
         if plan.certified:
             # a robot alone holding a room a drive found is no redundant one
             plan.redundant = set(plan.redundant) - lone_room_holders(
-                self.evidence, snap, evidence["probe_clear"])
+                self.evidence, snap, evidence["probe_clear"], plan.redundant)
             tri = self.placement.cut_off_triangle(self.roster)
             if tri is not None:
                 # robots cut off from every source see one another: they stand where the

@@ -165,32 +165,40 @@ def beyond_side(snap: Snapshot, linked: set[int] | None = None):
     return beyond
 
 
-def lone_room_holders(evidence: Evidence, snap: Snapshot, clear) -> frozenset[int]:
-    """The vertices of ``snap`` whose robots alone hold a room a drive found (``clear``:
-    the fence's ``probe_clear``): no other robot holds a room of the same side, and no
-    other vertex beside both ends of the side stands beyond it. Such a robot is no
-    redundant one: the room counts only while it stands there (Evidence.lost_rooms), so
-    sending it away reopens the side. The final pass did, the side was swept again, found
-    the same room, and that robot was sent away in turn (office_ros seed 0: 53 cycles and
-    514 s after the first certificate, 42 robots more started). A side that another
-    room's robot keeps closed (pillar_hall seed 2: one from each end), or another robot
-    beyond it keeps covered, stays so without it."""
+def lone_room_holders(evidence: Evidence, snap: Snapshot, clear,
+                      leaving=frozenset()) -> frozenset[int]:
+    """Of the vertices ``leaving`` (a redundancy pass's), those whose robots alone hold a
+    room a drive found (``clear``: the fence's ``probe_clear``): no other robot that stays
+    holds a room of the same side, and no other vertex beside both ends of the side that
+    stays stands beyond it. Such a robot is no redundant one: the room counts only while it
+    stands there (Evidence.lost_rooms), so sending it away reopens the side. The final
+    pass did, the side was swept again, found the same room, and that robot was sent away
+    in turn (office_ros seed 0: 53 cycles and 514 s after the first certificate, 42 robots
+    more started). A side that another room's robot keeps closed (pillar_hall seed 2: one
+    from each end), or another robot beyond it keeps covered, stays so without it. When
+    every such robot of a side is leaving, the one of the lowest vertex stays (the
+    others then have it beside them): sending them all away reopened the side once more."""
+    leaving = frozenset(leaving)
     rooms = {k: h for k, h in evidence.rooms(clear).items() if h in snap.occupant}
-    if not rooms:
+    if not rooms or not leaving:
         return frozenset()
     holders: dict[tuple, set[int]] = {}      # side (u, v, sigma) -> its rooms' robots
     for key, h in rooms.items():
         holders.setdefault(key[:3], set()).add(h)
     beyond = beyond_side(snap)
-    lone = set()
-    for key, h in rooms.items():
-        if holders[key[:3]] != {h}:
+    kept: set[int] = set()
+
+    def stays(w) -> bool:
+        return w not in leaving or w in kept
+
+    for key, h in sorted(rooms.items(), key=lambda kh: (kh[1], repr(kh[0]))):
+        if h not in leaving or h in kept or any(stays(o) for o in holders[key[:3]] - {h}):
             continue
         u, v = int(key[0]), int(key[1])
         nu, nv = snap.nbrs.get(u, {}), snap.nbrs.get(v, {})
-        if not any(w != h and w in nu and w in nv and beyond(key, w) for w in nu):
-            lone.add(h)
-    return frozenset(lone)
+        if not any(w != h and w in nu and w in nv and stays(w) and beyond(key, w) for w in nu):
+            kept.add(h)
+    return frozenset(kept)
 
 
 def evidence_kwargs(evidence: Evidence, snap: Snapshot, cut_off=frozenset()) -> dict:

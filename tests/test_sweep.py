@@ -624,8 +624,10 @@ def test_free_probes_are_capped_by_free_probes_max_not_by_the_pushes_cap():
         assert not set(snap.nbrs[f]) & set(many)
 
 
-@pytest.mark.parametrize("room", ["lone", "shared", "both_ends", None])
-def test_the_final_pass_keeps_the_robot_that_alone_holds_a_room(room):
+@pytest.mark.parametrize("room, all_leave", [("lone", False), ("shared", False),
+                                              ("both_ends", False), (None, False),
+                                              ("shared", True), ("both_ends", True)])
+def test_the_final_pass_keeps_the_robot_that_alone_holds_a_room(room, all_leave):
     """office_ros seed 0: a sweep found room and its robot stayed there, beyond the side.
     The final redundancy pass sent it away, so the room was lost and the side reopened (a
     room counts only while its robot stands there); it was swept again, found the same
@@ -633,7 +635,9 @@ def test_the_final_pass_keeps_the_robot_that_alone_holds_a_room(room):
     certificate, 42 robots more started. A robot that alone holds a room is not sent away;
     one whose side another robot also stands beyond ("shared"), or another room's robot
     keeps closed (pillar_hall seed 2: a room found from each end), is, as are the other
-    redundant ones."""
+    redundant ones. When the pass finds every robot of the side redundant at once
+    (``all_leave``: 3, 4 and 5), the lowest vertex's robot that holds a room stays (4):
+    sending them all away reopened the side once more."""
     from swarmcover.coordinator.deployer import Phase
     cx, ev = _candidate()
     a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
@@ -649,14 +653,21 @@ def test_the_final_pass_keeps_the_robot_that_alone_holds_a_room(room):
     dep, _ = _deployer(snap)
     dep.evidence = ev
 
-    def planner(s, params, **kw):                 # complete, and 3 and 4 redundant
+    found = {3, 4, 5} if all_leave else {3, 4}
+
+    def planner(s, params, **kw):                 # complete, and those of ``found`` redundant
         return dataclasses.replace(plan_cycle(s, params, **kw), frontier=[], jobs=[],
-                                   open_vertices=set(), certified=True, redundant={3, 4})
+                                   open_vertices=set(), certified=True, redundant=found)
 
     dep.planner = planner
     dep.phase, dep.phase_t = Phase.SETTLE, 0.0
     acts = dep.step(1.0)
     leave = {a.robot for a in acts if isinstance(a, SendTask) and a.task.kind == "leave"}
+    if all_leave:
+        assert leave == {13, 15}
+        (cx_msg,) = [a.complex for a in acts if isinstance(a, PublishComplex)]
+        assert cx_msg.certified and cx_msg.redundant == [3, 5]
+        return
     assert leave == ({13} if room == "lone" else {13, 14})
     (cx_msg,) = [a.complex for a in acts if isinstance(a, PublishComplex)]
     assert cx_msg.certified and cx_msg.redundant == ([3] if room == "lone" else [3, 4])
