@@ -11,6 +11,7 @@ import math
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from swarmcover.bus.messages import Status
 from swarmcover.coordinator import build_complex, detect_fence
@@ -75,8 +76,9 @@ def test_a_returned_probe_is_no_evidence_and_keeps_its_side_open():
     ev.record(mid, touched=False, returned=True)
     assert ev.returned_probes() == {k} and not ev.clear_probes() and not ev.failed_probes()
     assert set(ev.fence_kwargs()) == {"test_drive_failures", "probe_failures", "probe_clear",
-                                      "probe_unreachable", "probe_fracs", "probe_offsets",
-                                      "tilt_failures", "sweeps", "sweep_tries"}
+                                      "probe_found", "probe_unreachable", "probe_fracs",
+                                      "probe_offsets", "tilt_failures", "sweeps",
+                                      "sweep_tries"}
     # every other probe touches: the side stays frontier, the returned one still offered
     # (a recorded CLEAR probe would now close it as the inference 'probe_clear')
     for d in probes:
@@ -90,6 +92,50 @@ def test_a_returned_probe_is_no_evidence_and_keeps_its_side_open():
     # a push along a path that takes it and finds room stays there: a clear probe as ever
     ev.record(mid, touched=False)
     assert ev.clear_probes() == {k}
+
+
+@pytest.mark.parametrize("first", ["returned", "placed_then_lost"])
+def test_a_touch_where_a_probe_found_room_is_no_wall(first):
+    """bench/families.py seed 0 map 1: a free probe at fraction 0.25 drove through a 0.30
+    m door and came back; a probe at 0.25 from the other end then touched (a jamb, a cut
+    off robot in the door), the side's other probes touched the wall, and the side closed
+    on 'probes' with the room behind uncovered. A touch at a key where a drive found room
+    (a free probe that came back, or a clear probe whose robot later left) is no evidence:
+    the key is offered again, and after FOUND_TOUCH_LIMIT touches there no more; the side
+    then stays frontier with no deployment, neither closed nor inferred."""
+    from swarmcover.coordinator.topology.evidence import FOUND_TOUCH_LIMIT
+    ev = Evidence()
+    cx, f = _door_fence(ev)
+    e = int(cx.edge_index(0, 1))
+    probes = [d for lst in f.deployments.values() for d in lst if d.kind == "probe"]
+    mid = next(d for d in probes if d.via_frac == 0.5)
+    k = probe_key(mid.vertex, mid.edge, mid.sigma, mid.via_frac)
+    ev.record(mid, touched=False, returned=first == "returned",
+              placed=None if first == "returned" else 7)   # its robot stood at vertex 7
+    for d in probes:
+        if probe_key(d.vertex, d.edge, d.sigma, d.via_frac) != k:
+            ev.record(d, touched=True)
+    beyond = (lambda key, vertex: False) if first == "placed_then_lost" else None  # gone
+
+    def fence():
+        return detect_fence(cx, PROBES, **ev.fence_kwargs(beyond=beyond))
+
+    for n in range(FOUND_TOUCH_LIMIT):
+        f = fence()
+        left = {probe_key(d.vertex, d.edge, d.sigma, d.via_frac)
+                for lst in f.deployments.values() for d in lst if d.kind == "probe"}
+        assert left == {k} and e in f.frontier.tolist() and not f.obstacle.size
+        ev.record(mid, touched=True)            # the probe at k touched again
+        assert k not in ev.failed_probes()
+    f = fence()
+    assert not [d for lst in f.deployments.values() for d in lst if d.kind == "probe"]
+    assert e in f.frontier.tolist() and not f.obstacle.size and not f.inferred
+    # the same touches without the room found first: the side closes on evidence
+    ev2 = Evidence()
+    for d in probes:
+        ev2.record(d, touched=True)
+    f2 = detect_fence(cx, PROBES, **ev2.fence_kwargs())
+    assert e in f2.obstacle.tolist()
 
 
 def test_a_free_probe_needs_only_its_vertex_clear_of_movers_and_their_neighbours():

@@ -87,6 +87,7 @@ from typing import Callable, Container, Iterable, Mapping
 
 __all__ = ["ProbeKey", "SideKey", "DriveRecord", "Evidence", "probe_fractions",
            "probe_depth_rv", "probe_key", "needs_tilt", "tilted_door_rv", "TILT_MATCH",
+           "FOUND_TOUCH_LIMIT",
            "sweep_interval", "sweep_gaps"]
 
 # (u, v, sigma, frac): edge u < v (node ids), canonical open side sigma (coordinator.topology.fence's
@@ -102,6 +103,11 @@ INF = math.inf
 # A tilted probe that touched stands for any needed tilt within this (rad) of its own: the
 # same direction, up to the bearing noise in the edge's perpendicular.
 TILT_MATCH = math.radians(5.0)
+
+# Probes that may touch at a key where a drive found room (Evidence.found_rooms) before the
+# side stops offering it: then nothing closes that side, and the run ends uncertified
+# unless a robot gets into the room another way.
+FOUND_TOUCH_LIMIT = 2
 
 
 def probe_fractions(door_min_rv: float = 0.4, robot_radius_rv: float = 0.06) -> tuple[float, ...]:
@@ -244,6 +250,9 @@ class Evidence:
         self._sweep_tries: dict[ProbeKey, int] = {}
         self._sweep_by: dict[SideKey, set[int]] = {}   # side -> robot ids that stopped sweeps
         self._placed_n: dict[ProbeKey, int] = {}       # sweeps from that end whose robot stayed
+        # interior probes a drive went clear at (room found beyond the side) -> the probes
+        # that touched there since: no evidence of a wall (:meth:`found_rooms`)
+        self._found: dict[ProbeKey, int] = {}
 
     # ---------------------------------------------------------------- recording
     def record(self, dep, touched: bool, *, direction: float | None = None,
@@ -284,6 +293,8 @@ class Evidence:
         if touched:
             if interior:
                 key = probe_key(rec.vertex, edge, rec.sigma, frac)
+                if key in self._found:
+                    self._found[key] += 1
                 if tilt:
                     self._tilted.setdefault(key, []).append(tilt)
                 else:
@@ -291,12 +302,15 @@ class Evidence:
             else:
                 self.add_failed_direction(rec.vertex, d)
         elif interior and returned:
-            self._returned.add(probe_key(rec.vertex, edge, rec.sigma, frac))
+            key = probe_key(rec.vertex, edge, rec.sigma, frac)
+            self._returned.add(key)
+            self._found.setdefault(key, 0)
         elif interior:
             # a clear interior probe found room (its robot stays there): that fraction is
             # done, it is never offered again (re-offering it stacked robots: issue 21)
             key = probe_key(rec.vertex, edge, rec.sigma, frac)
             self._clear.add(key)
+            self._found.setdefault(key, 0)
             if placed is not None:
                 self._room_at[key] = int(placed)
         return rec
@@ -369,9 +383,21 @@ class Evidence:
         return {v: list(b) for v, b in self._failed.items() if present is None or v in present}
 
     def failed_probes(self, present: Container[int] | None = None) -> frozenset[ProbeKey]:
-        """Keys of interior probes that touched: detect_fence's ``probe_failures``."""
-        return frozenset(k for k in self._offsets
-                         if present is None or (k[0] in present and k[1] in present))
+        """Keys of interior probes that touched, less those a drive went clear at (a
+        room found there: :meth:`found_rooms`): detect_fence's ``probe_failures``."""
+        return frozenset(k for k in self._offsets if k not in self._found
+                         and (present is None or (k[0] in present and k[1] in present)))
+
+    def found_rooms(self, present: Container[int] | None = None) -> dict[ProbeKey, int]:
+        """Interior probe keys a drive went clear at (a free probe that came back, or a
+        clear probe whose robot stayed) -> how many probes touched there since. Room lies
+        beyond the side there, so a later touch at that key (a jamb clipped on the way
+        in, a robot in the door) is no evidence of a wall: bench/families.py seed 0 map 1
+        certified a room behind a 0.30 m door uncovered after a free probe at fraction
+        0.25 had driven through the door and come back, and a probe at 0.25 from the
+        other end touched. detect_fence's ``probe_found`` (less the rooms still held)."""
+        return {k: n for k, n in self._found.items()
+                if present is None or (k[0] in present and k[1] in present)}
 
     def probe_offsets(self, present: Container[int] | None = None) -> dict[ProbeKey, float]:
         """Touched perpendicular interior probes: key -> touch sector centre - direction
@@ -429,18 +455,21 @@ class Evidence:
     def fence_kwargs(self, present: Container[int] | None = None,
                      beyond: Callable[[ProbeKey, int], bool] | None = None) -> dict:
         """Keyword arguments for detect_fence: test_drive_failures, probe_failures,
-        probe_offsets, tilt_failures, probe_clear, probe_unreachable, probe_fracs, sweeps
-        and sweep_tries (restricted to nodes in ``present`` when given; with ``beyond``,
+        probe_offsets, tilt_failures, probe_clear, probe_found, probe_unreachable,
+        probe_fracs, sweeps and sweep_tries (restricted to nodes in ``present`` when given; with ``beyond``,
         less the :meth:`lost_rooms` and their tries)."""
         lost = self.lost_rooms(beyond) if beyond is not None else frozenset()
         tries = self.sweep_tries(present)
         for k in lost & tries.keys():
             tries[k] = max(0, tries[k] - self._placed_n.get(k, 1))
+        clear = self.clear_probes(present) - lost
         return dict(test_drive_failures=self.failed_directions(present),
                     probe_failures=self.failed_probes(present),
                     probe_offsets=self.probe_offsets(present),
                     tilt_failures=self.tilt_failures(present),
-                    probe_clear=self.clear_probes(present) - lost,
+                    probe_clear=clear,
+                    probe_found={k: n for k, n in self.found_rooms(present).items()
+                                 if k not in clear},
                     probe_unreachable=self.unreachable_probes(present),
                     probe_fracs=self.fractions,
                     sweeps=self.sweeps(present),

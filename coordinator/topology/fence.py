@@ -102,6 +102,7 @@ def detect_fence(
     probe_fracs=None,
     probe_unreachable=(),
     probe_clear=(),
+    probe_found=None,
     probe_offsets=None,
     tilt_failures=(),
     sweeps=None,
@@ -168,6 +169,12 @@ def detect_fence(
     probe_unreachable: (u, v, sigma, fraction, end): interior probes given up from that
       end (their approach kept failing).
     probe_clear: keys of interior probes that found room (done, not offered again).
+    probe_found: key -> probes touched there since: interior probes a drive went clear at
+      whose room no robot holds (a free probe came back, or its robot left). Not evidence
+      of a wall, whatever touched there later: the key is offered again (from the probe
+      rule, even on a side that is swept), and after evidence.FOUND_TOUCH_LIMIT touches no
+      more; the side then closes neither on evidence nor by inference (frontier with no
+      deployment: the run ends uncertified unless a robot reaches the room another way).
     probe_offsets: key -> touch sector centre minus the direction driven (rad) of touched
       perpendicular probes. Missing: the sector is unknown (no tilt from it).
     tilt_failures: key -> tilts (rad, from the perpendicular) of its TILTED probes that
@@ -201,7 +208,8 @@ def detect_fence(
     ends = test_drive_rule(cx, open_sides, room, ends)
     marks = corner_wait_marks(corner_wait, marks, room)
     ev = probe_evidence(probe_failures, probe_fracs, probe_unreachable, probe_clear,
-                        probe_offsets, tilt_failures, sweeps, sweep_tries, sweep_foreign)
+                        probe_offsets, tilt_failures, sweeps, sweep_tries, sweep_foreign,
+                        probe_found)
     if P.corner_probes:
         marks, ends = corner_candidates(marks, ends, open_sides)
     probing, marks = plan_probes(cx, L, P, room, ev, ends, marks, open_sides)
