@@ -247,21 +247,14 @@ def test_a_side_closes_only_after_all_its_probes_touched():
     left = [d for d in _probes(f) if d.edge == (0, 1)]
     assert left and all(d.via_frac == 0.5 for d in left)
     assert {d.vertex for d in left} == {0, 1}               # either end may drive it
-    # it touched too: now the side closes, on evidence
-    done = copy.deepcopy(ev)
-    done.record(left[0], touched=True)
-    f = detect_fence(cx, PROBES, **done.fence_kwargs())
-    assert e in f.obstacle.tolist() and f.by_index[e].sides[0].why == "probes"
-    assert f0.by_index[e].sides[0].reason == "open"
-    # it was clear instead (room there): the side never closes on evidence, and a touch
-    # there later is no wall (room was found: Evidence.found_rooms); its robot holds the
-    # room, so the side closes only as the inference 'probe_clear'
+    # it was clear (room there): the side never closes on evidence
     ev.record(left[0], touched=False)
     assert _open_or_inferred_clear(detect_fence(cx, PROBES, **ev.fence_kwargs()), e)
+    # it touched: now the side closes, on evidence
     ev.record(left[0], touched=True)
     f = detect_fence(cx, PROBES, **ev.fence_kwargs())
-    assert e in f.obstacle.tolist() and f.by_index[e].sides[0].why == "probe_clear"
-    assert (e, "probe_clear") in f.inferred
+    assert e in f.obstacle.tolist() and f.by_index[e].sides[0].why == "probes"
+    assert f0.by_index[e].sides[0].reason == "open"
 
 
 def test_interior_probes_of_one_robot_in_one_direction_do_not_block_each_other():

@@ -102,7 +102,9 @@ def test_a_touch_where_a_probe_found_room_is_no_wall(first):
     on 'probes' with the room behind uncovered. A touch at a key where a drive found room
     (a free probe that came back, or a clear probe whose robot later left) is no evidence:
     the key is offered again, and after FOUND_TOUCH_LIMIT touches there no more; the side
-    then stays frontier with no deployment, neither closed nor inferred."""
+    then stays frontier with no deployment, neither closed nor inferred. That holds on a
+    side a robot cut off from the swarm stopped a sweep of (there robot 114 stood in the
+    room); elsewhere a later touch counts as before."""
     from swarmcover.coordinator.topology.evidence import FOUND_TOUCH_LIMIT
     ev = Evidence()
     cx, f = _door_fence(ev)
@@ -117,8 +119,11 @@ def test_a_touch_where_a_probe_found_room_is_no_wall(first):
             ev.record(d, touched=True)
     beyond = (lambda key, vertex: False) if first == "placed_then_lost" else None  # gone
 
-    def fence():
-        return detect_fence(cx, PROBES, **ev.fence_kwargs(beyond=beyond))
+    side = (*cx.ids[list(cx.edges[e])].tolist(), probes[0].sigma)
+
+    def fence(foreign=(side,)):
+        return detect_fence(cx, PROBES, **ev.fence_kwargs(beyond=beyond), sweep_foreign=foreign)
+
 
     for n in range(FOUND_TOUCH_LIMIT):
         f = fence()
@@ -126,10 +131,11 @@ def test_a_touch_where_a_probe_found_room_is_no_wall(first):
                 for lst in f.deployments.values() for d in lst if d.kind == "probe"}
         assert left == {k} and e in f.frontier.tolist() and not f.obstacle.size
         ev.record(mid, touched=True)            # the probe at k touched again
-        assert k not in ev.failed_probes()
     f = fence()
     assert not [d for lst in f.deployments.values() for d in lst if d.kind == "probe"]
     assert e in f.frontier.tolist() and not f.obstacle.size and not f.inferred
+    f = fence(foreign=())                       # no robot cut off: the touches close it
+    assert e in f.obstacle.tolist() and f.by_index[e].sides[0].why == "probes"
     # the same touches without the room found first: the side closes on evidence
     ev2 = Evidence()
     for d in probes:

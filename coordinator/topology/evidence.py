@@ -383,19 +383,21 @@ class Evidence:
         return {v: list(b) for v, b in self._failed.items() if present is None or v in present}
 
     def failed_probes(self, present: Container[int] | None = None) -> frozenset[ProbeKey]:
-        """Keys of interior probes that touched, less those a drive went clear at (a
-        room found there: :meth:`found_rooms`): detect_fence's ``probe_failures``."""
-        return frozenset(k for k in self._offsets if k not in self._found
-                         and (present is None or (k[0] in present and k[1] in present)))
+        """Keys of interior probes that touched: detect_fence's ``probe_failures`` (which
+        sets aside those of :meth:`found_rooms` on sides a cut-off robot stopped a sweep
+        of)."""
+        return frozenset(k for k in self._offsets
+                         if present is None or (k[0] in present and k[1] in present))
 
     def found_rooms(self, present: Container[int] | None = None) -> dict[ProbeKey, int]:
         """Interior probe keys a drive went clear at (a free probe that came back, or a
         clear probe whose robot stayed) -> how many probes touched there since. Room lies
-        beyond the side there, so a later touch at that key (a jamb clipped on the way
-        in, a robot in the door) is no evidence of a wall: bench/families.py seed 0 map 1
-        certified a room behind a 0.30 m door uncovered after a free probe at fraction
-        0.25 had driven through the door and come back, and a probe at 0.25 from the
-        other end touched. detect_fence's ``probe_found`` (less the rooms still held)."""
+        beyond the side there, so on a side a robot cut off from the swarm stopped a sweep
+        of, a later touch at that key (a jamb clipped on the way in, that robot in the
+        door) is no evidence of a wall (coordinator.topology.fence_probes):
+        bench/families.py seed 0 map 1 certified a room behind a 0.30 m door uncovered
+        after a free probe at fraction 0.25 had driven through the door and come back,
+        and a probe at 0.25 from the other end touched. detect_fence's ``probe_found`` (less the rooms still held)."""
         return {k: n for k, n in self._found.items()
                 if present is None or (k[0] in present and k[1] in present)}
 

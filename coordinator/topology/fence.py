@@ -170,11 +170,12 @@ def detect_fence(
       end (their approach kept failing).
     probe_clear: keys of interior probes that found room (done, not offered again).
     probe_found: key -> probes touched there since: interior probes a drive went clear at
-      whose room no robot holds (a free probe came back, or its robot left). Not evidence
-      of a wall, whatever touched there later: the key is offered again (from the probe
-      rule, even on a side that is swept), and after evidence.FOUND_TOUCH_LIMIT touches no
-      more; the side then closes neither on evidence nor by inference (frontier with no
-      deployment: the run ends uncertified unless a robot reaches the room another way).
+      whose room no robot holds (a free probe came back, or its robot left). On a side in
+      ``sweep_foreign`` (a robot cut off from the swarm stopped one of its sweeps) a touch
+      there later is no evidence of a wall: the key is offered again, and after
+      evidence.FOUND_TOUCH_LIMIT touches no more; the side then closes neither on
+      evidence nor by inference (frontier with no deployment: the run ends uncertified
+      unless a robot reaches the room another way). On other sides a later touch counts.
     probe_offsets: key -> touch sector centre minus the direction driven (rad) of touched
       perpendicular probes. Missing: the sector is unknown (no tilt from it).
     tilt_failures: key -> tilts (rad, from the perpendicular) of its TILTED probes that

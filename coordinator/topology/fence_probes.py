@@ -116,8 +116,14 @@ def probe_evidence(probe_failures=(), probe_fracs=None, probe_unreachable=(), pr
              for k, iv in (sweeps or {}).items()}
     tries = {_key(k): int(n) for k, n in (sweep_tries or {}).items()}
     foreign = frozenset((int(k[0]), int(k[1]), int(k[2])) for k in sweep_foreign)
-    found = {_key(k): int(n) for k, n in (probe_found or {}).items()}
-    pfail -= found.keys()               # a touch where room was found is no wall
+    # room found at a key of a side a robot cut off from the swarm stopped a sweep of: it
+    # stands in free space the complex does not hold, and the room is there; a touch at
+    # that key since (a jamb clipped on the way in, that robot in the door) is no wall.
+    # Elsewhere a later touch still counts (a clear drive past a pocket of a curved wall:
+    # holding those sides open left cave seed 0 uncertified, "no feasible push")
+    found = {_key(k): int(n) for k, n in (probe_found or {}).items()
+             if (int(k[0]), int(k[1]), int(k[2])) in foreign}
+    pfail -= found.keys()
     return ProbeEvidence(fracs, frozenset(pfail), poff, tfail, frozenset(pclear),
                          frozenset(punreach), swept, tries, foreign, found)
 
@@ -296,21 +302,19 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
             # the side at every fraction instead: a probe that finds room there stays, seen
             # by that robot, which then links again (closed, the room behind a 0.30 rv door
             # was certified at 54% coverage: bench/unseen.py seed 0 map 8)
-            # So is one where a probe found room that no robot holds (it went back, or its
-            # robot left): no inference closes that either
-            key = _side_key(cx, e, sg)
             sweep = (bool(inner) or (n_open == 0 and n_clear == 0)
-                     or (key not in ev.foreign and not ev.found_at(key)))
+                     or _side_key(cx, e, sg) not in ev.foreign)
         if not sweep:
             inner, n_open, n_clear = _side_probes(cx, L, P, room, ev, e, sg)
         if inner:
             probing[(e, sg)] = sorted(inner, key=lambda d: d.via_frac)
         elif not sweep and ev.found_at(_side_key(cx, e, sg)):
-            # a drive found room beyond it and no probe since got in (each touched, a jamb
-            # or a robot in the door, FOUND_TOUCH_LIMIT times): neither evidence nor an
-            # inference closes it. Frontier with no deployment: the run ends uncertified
-            # unless a robot reaches the room another way (bench/families.py seed 0 map 1
-            # certified the room behind a 0.30 m door uncovered through 'probes')
+            # a cut-off robot stopped its sweeps, a drive found room beyond it, and no probe
+            # since got in (each touched, a jamb or a robot in the door, FOUND_TOUCH_LIMIT
+            # times): neither evidence nor an inference closes it. Frontier with no
+            # deployment: the run ends uncertified unless a robot reaches the room another
+            # way (bench/families.py seed 0 map 1 certified the room behind a 0.30 m door
+            # uncovered through 'probes')
             probing[(e, sg)] = []
         elif n_open == 0 and n_clear == 0:
             marks[(e, sg)] = "probes"         # every probe touched: closed on evidence
