@@ -66,13 +66,18 @@ def _door_fence(ev):
     return cx, detect_fence(cx, PROBES, **ev.fence_kwargs())
 
 
-def test_a_returned_probe_is_no_evidence_and_keeps_its_side_open():
-    ev = Evidence()
+def _door_middle(ev):
+    """The door fence's edge (0, 1), its probes, the middle one and its key."""
     cx, f = _door_fence(ev)
-    e = int(cx.edge_index(0, 1))
     probes = [d for lst in f.deployments.values() for d in lst if d.kind == "probe"]
     mid = next(d for d in probes if d.via_frac == 0.5)
-    k = probe_key(mid.vertex, mid.edge, mid.sigma, mid.via_frac)
+    return cx, int(cx.edge_index(0, 1)), probes, mid, probe_key(mid.vertex, mid.edge,
+                                                               mid.sigma, mid.via_frac)
+
+
+def test_a_returned_probe_is_no_evidence_and_keeps_its_side_open():
+    ev = Evidence()
+    cx, e, probes, mid, k = _door_middle(ev)
     ev.record(mid, touched=False, returned=True)
     assert ev.returned_probes() == {k} and not ev.clear_probes() and not ev.failed_probes()
     assert set(ev.fence_kwargs()) == {"test_drive_failures", "probe_failures", "probe_clear",
@@ -107,11 +112,7 @@ def test_a_touch_where_a_probe_found_room_is_no_wall(first):
     room); elsewhere a later touch counts as before."""
     from swarmcover.coordinator.topology.evidence import FOUND_TOUCH_LIMIT
     ev = Evidence()
-    cx, f = _door_fence(ev)
-    e = int(cx.edge_index(0, 1))
-    probes = [d for lst in f.deployments.values() for d in lst if d.kind == "probe"]
-    mid = next(d for d in probes if d.via_frac == 0.5)
-    k = probe_key(mid.vertex, mid.edge, mid.sigma, mid.via_frac)
+    cx, e, probes, mid, k = _door_middle(ev)
     ev.record(mid, touched=False, returned=first == "returned",
               placed=None if first == "returned" else 7)   # its robot stood at vertex 7
     for d in probes:
