@@ -159,9 +159,9 @@ def corridors(rng) -> tuple[np.ndarray, str]:
         for j in range(gy - 1):
             x0, x1 = jx(i) + w / 2 + T, jx(i + 1) - w / 2 - T
             y0, y1 = jx(j) + w / 2 + T, jx(j + 1) - w / 2 - T
-            sides = [s for s, e in (("S", ((i, j), (i + 1, j))), ("N", ((i, j + 1), (i + 1, j + 1))),
-                                    ("W", ((i, j), (i, j + 1))), ("E", ((i + 1, j), (i + 1, j + 1))))
-                     if e in links]
+            walls = {"S": ((i, j), (i + 1, j)), "N": ((i, j + 1), (i + 1, j + 1)),
+                     "W": ((i, j), (i, j + 1)), "E": ((i + 1, j), (i + 1, j + 1))}
+            sides = [s for s, e in walls.items() if e in links]
             if not sides or rng.random() < 0.2:
                 continue                              # a solid block
             box(x0, y0, x1, y1, True)

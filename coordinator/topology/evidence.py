@@ -397,7 +397,8 @@ class Evidence:
         door) is no evidence of a wall (coordinator.topology.fence_probes):
         bench/families.py seed 0 map 1 certified a room behind a 0.30 m door uncovered
         after a free probe at fraction 0.25 had driven through the door and come back,
-        and a probe at 0.25 from the other end touched. detect_fence's ``probe_found`` (less the rooms still held)."""
+        and a probe at 0.25 from the other end touched. detect_fence's ``probe_found``
+        (less the rooms still held)."""
         return {k: n for k, n in self._found.items()
                 if present is None or (k[0] in present and k[1] in present)}
 
@@ -458,8 +459,8 @@ class Evidence:
                      beyond: Callable[[ProbeKey, int], bool] | None = None) -> dict:
         """Keyword arguments for detect_fence: test_drive_failures, probe_failures,
         probe_offsets, tilt_failures, probe_clear, probe_found, probe_unreachable,
-        probe_fracs, sweeps and sweep_tries (restricted to nodes in ``present`` when given; with ``beyond``,
-        less the :meth:`lost_rooms` and their tries)."""
+        probe_fracs, sweeps and sweep_tries (restricted to nodes in ``present`` when
+        given; with ``beyond``, less the :meth:`lost_rooms` and their tries)."""
         lost = self.lost_rooms(beyond) if beyond is not None else frozenset()
         tries = self.sweep_tries(present)
         for k in lost & tries.keys():
