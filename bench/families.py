@@ -24,10 +24,14 @@ Families (rv = 1 m; "narrow" is below the 0.4 rv ``door_min_rv`` guarantee on pu
 
 Each map's source is a random free point with 0.4 m clearance, facing a random way; odd
 maps have 0.5 deg bearing noise. A map is map ``index`` of campaign ``seed``: the same
-pair always gives the same map.
+pair always gives the same map. With ``--turn`` each map is the same map turned 5-40 deg
+either way about its centre (its own random stream) and drawn again on the 0.05 m grid
+(:func:`turn_raster`): every wall oblique, in raster steps, as a ROS map of a building
+scanned off its axes draws it; the source is drawn on the turned map.
 
     python bench/families.py --maps 8 --jobs 2                  # maps 0-7: two of each family
     python bench/families.py --maps 4 --seed 1 --families cave office --out /tmp/fam
+    python bench/families.py --maps 4 --turn                    # the same maps 0-3, turned
 
 Prints a row per map, a summary, and one JSON object as the last line; exits 1 on a false
 certificate or an error.
@@ -66,6 +70,32 @@ def _keep_component(free: np.ndarray, at) -> np.ndarray:
     free[:, :4] = free[:, -4:] = False
     lab, _ = ndimage.label(free)
     return lab == lab[int(at[1] / RES), int(at[0] / RES)]
+
+
+def turn_raster(free: np.ndarray, deg: float) -> np.ndarray:
+    """``free`` (bool (ny, nx), row 0 the lowest y, cells of RES m) turned ``deg`` CCW
+    about its centre and drawn again on a grid of RES m cells big enough to hold it: a
+    cell is free when the old cell under its centre is (outside the old grid: solid).
+    Only the largest free part is kept, with the 0.2 m solid rim of every family map.
+    Walls 2 cells thick stay closed (4-connected) up to 45 deg."""
+    ny, nx = free.shape
+    W, H = nx * RES, ny * RES
+    a = math.radians(deg)
+    c, s = math.cos(a), math.sin(a)
+    W2, H2 = abs(W * c) + abs(H * s) + 0.4, abs(W * s) + abs(H * c) + 0.4
+    xx, yy = _grid(W2, H2)
+    xx, yy = xx - W2 / 2, yy - H2 / 2
+    i = np.floor((c * xx + s * yy + W / 2) / RES).astype(int)     # the old cell under it
+    j = np.floor((-s * xx + c * yy + H / 2) / RES).astype(int)
+    inside = (i >= 0) & (i < nx) & (j >= 0) & (j < ny)
+    out = np.zeros(xx.shape, bool)
+    out[inside] = free[j[inside], i[inside]]
+    lab, n = ndimage.label(out)
+    if n == 0:
+        return out
+    big = 1 + int(np.argmax(ndimage.sum(out, lab, range(1, n + 1))))
+    jj, ii = np.argwhere(lab == big)[0]
+    return _keep_component(lab == big, ((ii + 0.5) * RES, (jj + 0.5) * RES))
 
 
 def cave(rng) -> tuple[np.ndarray, str]:
@@ -265,12 +295,19 @@ class FamilyMap:
     about: str
 
 
-def make_family_map(seed: int, index: int, families=FAMILIES) -> FamilyMap:
-    """Map ``index`` of campaign ``seed``: family ``families[index % len(families)]``."""
+def make_family_map(seed: int, index: int, families=FAMILIES, turn: bool = False
+                    ) -> FamilyMap:
+    """Map ``index`` of campaign ``seed``: family ``families[index % len(families)]``;
+    with ``turn`` the same map turned 5-40 deg either way (:func:`turn_raster`)."""
     family = families[index % len(families)]
     rng = np.random.default_rng([seed, index, FAMILIES.index(family)])
     free, about = {"cave": cave, "corridors": corridors, "pillars": pillars,
                    "office": office}[family](rng)
+    if turn:
+        t = np.random.default_rng([seed, index, FAMILIES.index(family), 7])
+        deg = float(t.uniform(5.0, 40.0)) * (1.0 if t.random() < 0.5 else -1.0)
+        free = turn_raster(free, deg)
+        about += f", turned {deg:+.1f} deg"
     clear = ndimage.distance_transform_edt(free) * RES
     ok = np.argwhere(clear >= 0.4)
     r, c = ok[int(rng.integers(len(ok)))]
@@ -278,11 +315,11 @@ def make_family_map(seed: int, index: int, families=FAMILIES) -> FamilyMap:
     return FamilyMap(family, free, source, 0.5 if index % 2 else 0.0, about)
 
 
-def write_config(seed: int, index: int, folder: Path, families=FAMILIES):
-    """Map ``index`` of campaign ``seed`` as a ROS map and run config in ``folder``;
-    returns (path, FamilyMap)."""
-    m = make_family_map(seed, index, families)
-    name = f"family_s{seed}_m{index}_{m.family}"
+def write_config(seed: int, index: int, folder: Path, families=FAMILIES, turn: bool = False):
+    """Map ``index`` of campaign ``seed`` (turned with ``turn``) as a ROS map and run
+    config in ``folder``; returns (path, FamilyMap)."""
+    m = make_family_map(seed, index, families, turn)
+    name = f"family_s{seed}_m{index}_{m.family}{'_turned' if turn else ''}"
     write_ros_map(folder / name, m.free, RES)
     x, y, th = m.source
     path = folder / f"{name}.toml"
@@ -298,10 +335,10 @@ def write_config(seed: int, index: int, folder: Path, families=FAMILIES):
 
 def run_map(job) -> dict:
     """One map: write it, run it in-process, judge it by ground truth."""
-    seed, index, folder, timeout, families = job
+    seed, index, folder, timeout, families, turn = job
     from bench.unseen import judge
-    path, m = write_config(seed, index, Path(folder), families)
-    row = dict(seed=seed, index=index, family=m.family, about=m.about,
+    path, m = write_config(seed, index, Path(folder), families, turn)
+    row = dict(seed=seed, index=index, family=m.family, turned=turn, about=m.about,
                noise_deg=m.noise_deg, free_m2=round(float(m.free.sum()) * RES * RES, 1),
                config=str(path))
     return judge(str(path), row, timeout)
@@ -319,6 +356,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="campaign")
     ap.add_argument("--families", nargs="+", choices=FAMILIES, default=list(FAMILIES),
                     help="map i is of family i %% len(families) (default: all four)")
+    ap.add_argument("--turn", action="store_true",
+                    help="each map turned 5-40 deg either way and drawn again on its grid")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes")
     ap.add_argument("--timeout", type=float, default=3600.0, help="wall seconds per map")
     ap.add_argument("--out", help="folder for the maps, configs and results.json "
@@ -326,7 +365,7 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     fam = tuple(a.families)
     return campaign(ap, a, "families", lambda folder: [
-        (a.seed, i, folder, a.timeout, fam) for i in range(a.start, a.start + a.maps)],
+        (a.seed, i, folder, a.timeout, fam, a.turn) for i in range(a.start, a.start + a.maps)],
         run_map, _head)
 
 

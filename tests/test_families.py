@@ -53,3 +53,50 @@ def test_bad_flags_are_usage_errors_naming_the_flag(argv, capsys):
         families.main(argv)
     assert e.value.code == 2
     assert argv[0] in capsys.readouterr().err
+
+
+def _room_with_wall(door: bool) -> np.ndarray:
+    """A 6 m x 4 m room (0.2 m rim) split at x = 3 m by a wall 0.1 m (two cells) thick,
+    with a 0.4 m door in it or none."""
+    xx, yy = families._grid(6.4, 4.4)
+    free = (xx > 0.2) & (xx < 6.2) & (yy > 0.2) & (yy < 4.2)
+    free &= ~((xx > 3.15) & (xx < 3.25))
+    if door:
+        free |= (xx > 3.1) & (xx < 3.3) & (yy > 2.0) & (yy < 2.4)
+    return free
+
+
+@pytest.mark.parametrize("deg", [-40.0, -23.0, -5.0, 5.0, 17.0, 31.0, 40.0, 45.0])
+def test_a_turned_map_keeps_its_walls_closed_and_its_doors_open(deg):
+    """turn_raster draws the map again on its grid: the area stays (within a cell's
+    width along the boundary), a wall two cells thick still divides the room, and a
+    0.4 m door in it still joins the halves for a robot of radius 0.06 m."""
+    shut, door = _room_with_wall(False), _room_with_wall(True)
+    turned = families.turn_raster(shut, deg)
+    # the wall stays closed: without the door the largest half is all that is kept
+    assert turned.sum() == pytest.approx(shut.sum() / 2, rel=0.06)
+    t_door = families.turn_raster(door, deg)
+    assert t_door.sum() == pytest.approx(door.sum(), rel=0.03)
+    reach = ndimage.binary_erosion(t_door, structure=np.ones((3, 3)), iterations=1)
+    assert ndimage.label(reach)[1] == 1
+
+
+def test_turned_maps_are_the_same_maps_turned_and_named_so(tmp_path):
+    """Maps 0-3 of campaign 0, turned: each has the area of its unturned map (within
+    1%), one free part, a source with 0.4 m clearance, its own name; the unturned map is
+    unchanged by the option's existence (its own random stream)."""
+    for index in range(4):
+        m0 = families.make_family_map(0, index)
+        path, m1 = families.write_config(0, index, tmp_path, turn=True)
+        assert path.name.endswith("_turned.toml") and "turned" in m1.about
+        assert m1.family == m0.family and m1.noise_deg == m0.noise_deg
+        assert m1.free.sum() == pytest.approx(m0.free.sum(), rel=0.01)
+        assert ndimage.label(m1.free)[1] == 1
+        wm = build_map(load_config(str(path)))
+        assert wm.free_area == pytest.approx(m1.free.sum() * families.RES ** 2, rel=0.02)
+        assert not (m1.free.shape == m0.free.shape and np.array_equal(m1.free, m0.free))
+        x, y, _ = m1.source
+        clear = ndimage.distance_transform_edt(m1.free) * families.RES
+        assert clear[int(y / families.RES), int(x / families.RES)] >= 0.4 - families.RES
+        again = families.make_family_map(0, index)
+        assert np.array_equal(again.free, m0.free) and again.source == m0.source
