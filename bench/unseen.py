@@ -96,7 +96,25 @@ def judge(config: str, row: dict, timeout: float) -> dict:
     keep = ("certified", "stop_reason", "coverage", "coverage_complex", "false_certificate", "uncovered_reachable_m2",
             "false_certificate_where", "robots_used", "euler_bound", "robots_per_bound",
             "sim_time_s", "sim_s_per_robot", "cycles")
-    return dict(row, **{k: s.get(k) for k in keep}, wall_s=round(time.monotonic() - t0, 1))
+    audit = (s.get("fence_audit") or {}).get("by_why")
+    return dict(row, **{k: s.get(k) for k in keep}, fence_audit=audit,
+                wall_s=round(time.monotonic() - t0, 1))
+
+
+def audit_totals(rows: list[dict]) -> dict:
+    """The certified runs' closed sides per reason ('probes' is evidence, the rest
+    inference): sides, with room behind (free space deeper than the no-room depth), and of
+    those not covered (summary.json's ``fence_audit``)."""
+    tot: dict[str, dict] = {}
+    for r in rows:
+        if not r.get("certified"):
+            continue
+        for why, a in (r.get("fence_audit") or {}).items():
+            t = tot.setdefault(why, dict(sides=0, room_behind=0, room_uncovered=0, maps=0))
+            t["maps"] += 1
+            for k in ("sides", "room_behind", "room_uncovered"):
+                t[k] += int(a.get(k, 0))
+    return dict(sorted(tot.items(), key=lambda kv: -kv[1]["sides"]))
 
 
 def run_map(job) -> dict:
@@ -121,7 +139,7 @@ def summarise(rows: list[dict]) -> dict:
                                           if r.get("coverage_complex") is not None), default=None),
                 robots_per_bound_mean=(sum(rpb) / len(rpb)) if rpb else None,
                 sim_s_per_robot_mean=(sum(r["sim_s_per_robot"] for r in cert) / len(cert))
-                if cert else None)
+                if cert else None, closed_sides=audit_totals(rows))
 
 
 def _head(r: dict) -> str:
@@ -185,6 +203,9 @@ def campaign(ap, a, bench: str, make_jobs, run_map, head) -> int:
           f"certificates, {s['errors']} errors; not certified: {s['not_certified'] or 'none'}; "
           f"robots / Euler bound {s['robots_per_bound_mean'] or math.nan:.2f} on average; "
           f"wall {s['wall_s']} s")
+    for why, t in s["closed_sides"].items():
+        print(f"  closed '{why}': {t['sides']} sides on {t['maps']} maps, {t['room_behind']} "
+              f"with room behind, {t['room_uncovered']} of those uncovered")
     if a.out:
         (folder / "results.json").write_text(json.dumps({"summary": s, "maps": rows}, indent=1))
     print(json.dumps({"bench": bench, "seed": a.seed, "summary": s, "maps": rows}))

@@ -152,3 +152,76 @@ def _open_sides_left(el, tl, pts, fenced: set, margin: float) -> list[int]:
         if s and len(s) == 1 and 0 not in s and k not in fenced:
             out.append(k)
     return out
+
+
+AUDIT_FRACTIONS = tuple(k / 10 for k in range(1, 10))   # where along an edge rays start
+
+
+def fence_audit(cx, positions: dict, walls, rv: float, room_depth: float,
+                covered=None, raster=None) -> dict:
+    """Ground truth on the claim each closed fence side makes (pure, no I/O).
+
+    For every obstacle edge of the Complex message ``cx`` with triangles on one side only
+    in the world (``positions``: robot id -> (x, y)), rays leave its open side along the
+    normal from 9 points along it, and the deepest free run before a segment of ``walls``
+    (E, 4) is its depth (capped at 2 rv). A side deeper than ``room_depth`` (m) has room
+    behind it: it was closed although free space goes on there, and only the rest of the
+    swarm covers that space. Per reason ('probes' for evidence, else ``inferred_why``):
+    sides, room_behind, and of those how many have the point 0.9 rv into the room along
+    the deepest ray (or short of the wall it meets) in ``covered`` (the summary's coverage
+    raster, ``raster``'s cells) or not. ``examples`` lists up to 20 room-behind sides."""
+    from swarmcover.world.maps import ray_lengths
+    occ = dict(zip(cx.vertices, cx.occupants))
+    E = np.asarray(cx.edges, np.int64).reshape(-1, 2)
+    why = {int(k): str(w) for k, w in zip(getattr(cx, "inferred", None) or (),
+                                          getattr(cx, "inferred_why", None) or ())}
+    apex: dict[tuple[int, int], list[int]] = {}
+    for t in np.asarray(cx.triangles, np.int64).reshape(-1, 3).tolist():
+        for i in range(3):
+            a, b = sorted((t[i], t[(i + 1) % 3]))
+            apex.setdefault((a, b), []).append(t[(i + 2) % 3])
+    rows = []
+    for k in sorted(set(int(x) for x in cx.obstacle)):
+        if not 0 <= k < len(E):
+            continue
+        a, b = (int(x) for x in E[k])
+        pa, pb = positions.get(occ.get(a, -1)), positions.get(occ.get(b, -1))
+        if pa is None or pb is None:
+            continue
+        pa, pb = np.asarray(pa, float), np.asarray(pb, float)
+        d = pb - pa
+        ln = float(np.hypot(*d))
+        if ln <= 0:
+            continue
+        signs = set()
+        for c in apex.get((min(a, b), max(a, b)), ()):
+            pc = positions.get(occ.get(c, -1))
+            if pc is not None:
+                cr = (d[0] * (pc[1] - pa[1]) - d[1] * (pc[0] - pa[0])) / ln
+                signs.add(0 if abs(cr) <= SIDE_MARGIN * rv else (1 if cr > 0 else -1))
+        if len(signs) != 1 or 0 in signs:
+            continue                  # no triangle, or triangles on both sides: not one-sided
+        normal = -next(iter(signs)) * np.array([-d[1], d[0]]) / ln
+        starts = pa + np.outer(AUDIT_FRACTIONS, d)
+        depths = ray_lengths(starts, np.tile(normal, (len(starts), 1)), walls, 2.0 * rv)
+        j = int(np.argmax(depths))
+        row = dict(a=a, b=b, why=why.get(k, "probes"), depth_m=float(depths[j]))
+        if row["depth_m"] > room_depth and covered is not None and raster is not None:
+            q = starts[j] + normal * min(0.9 * rv, row["depth_m"] - raster.cell)
+            ix = int(math.floor((q[0] - raster.x0) / raster.cell))
+            iy = int(math.floor((q[1] - raster.y0) / raster.cell))
+            ny, nx = covered.shape
+            row["beyond_covered"] = bool(0 <= iy < ny and 0 <= ix < nx and covered[iy, ix])
+        rows.append(row)
+    by: dict[str, dict] = {}
+    for r in rows:
+        s = by.setdefault(r["why"], dict(sides=0, room_behind=0, room_covered=0,
+                                         room_uncovered=0, max_depth_rv=0.0))
+        s["sides"] += 1
+        s["max_depth_rv"] = max(s["max_depth_rv"], round(r["depth_m"] / rv, 3))
+        if r["depth_m"] > room_depth:
+            s["room_behind"] += 1
+            if "beyond_covered" in r:
+                s["room_covered" if r["beyond_covered"] else "room_uncovered"] += 1
+    deep = sorted((r for r in rows if r["depth_m"] > room_depth), key=lambda r: -r["depth_m"])
+    return dict(room_depth_m=room_depth, by_why=by, examples=deep[:20])

@@ -178,11 +178,15 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)   # each ends a ru
 STOPPING_GATES = ("no_command", "command_stale", "no_mocap", "mocap_stale", "geofence")
 
 
-def _deploy_spacing(cfg) -> float:
-    """d0 (m): the spacing new robots are placed at, rv - eps (``[coordinator] eps_rv``)."""
+def _coordinator_config(cfg):
     from swarmcover.coordinator.config import CoordinatorConfig
     return CoordinatorConfig.from_section(dict(cfg.section("coordinator")), rv=cfg.rv,
-                                          where=str(cfg.path)).d0
+                                          where=str(cfg.path))
+
+
+def _deploy_spacing(cfg) -> float:
+    """d0 (m): the spacing new robots are placed at, rv - eps (``[coordinator] eps_rv``)."""
+    return _coordinator_config(cfg).d0
 
 
 def compute_summary(cfg, wmap, truth: Truth | None, cx: Complex | None, extra: dict) -> dict:
@@ -278,6 +282,13 @@ def compute_summary(cfg, wmap, truth: Truth | None, cx: Complex | None, extra: d
     if out["false_certificate"]:
         out["false_certificate_where"] = reach["where"]
     out["inferred_obstacle_edges"] = _inferred_edges(cx, pos)
+    # ground truth on each closed side's claim (issue 19's inference rules): how deep the
+    # free space runs behind it, per reason, and whether the room behind is covered
+    out["fence_audit"] = None
+    if cx is not None and certified and pos:
+        from swarmcover.recheck import fence_audit
+        out["fence_audit"] = fence_audit(cx, pos, wmap.walls, rv,
+                                         _coordinator_config(cfg).wall_keep, covered, raster)
     out.update({k: v for k, v in extra.items() if k not in out})
     return out
 

@@ -337,3 +337,34 @@ def test_push_floor_is_the_complex_mean_move_plus_entry_and_null_without_them():
         s = compute_summary(cfg, wm, t, cx, dict(certified=False, sim_time_s=40.0))
         assert s["push_floor_s"] is None and s["s_per_robot_over_floor"] is None
         _strict(strict_json(s))
+
+
+def test_fence_audit_says_how_deep_the_free_space_runs_behind_each_closed_side():
+    """The four sides of a square of robots in a 4 m x 3 m room: the bottom one 0.2 m
+    from the wall (no room), the left one 1 m from it, the right and top ones facing the
+    open room (room behind, depth capped at 2 rv). Per reason: the inferred left side is
+    counted apart from the three closed on evidence, and whether the room behind a side
+    is covered comes from the coverage raster it is given."""
+    from swarmcover.recheck import fence_audit
+    wm = _room()
+    cx = _certified_square()
+    cx.inferred, cx.inferred_why = [1], ["probe_clear"]
+    pos = {10: (1.0, 0.2), 11: (1.8, 0.2), 12: (1.0, 1.0), 13: (1.8, 1.0)}
+    _, covered, raster = coverage_fraction(wm, np.array(list(pos.values())), 1.0,
+                                           return_mask=True)
+    a = fence_audit(cx, pos, wm.walls, 1.0, 0.75, covered, raster)
+    by = a["by_why"]
+    assert set(by) == {"probes", "probe_clear"}
+    assert by["probes"]["sides"] == 3 and by["probes"]["room_behind"] == 2
+    assert by["probe_clear"] == dict(sides=1, room_behind=1, room_covered=1, room_uncovered=0,
+                                     max_depth_rv=pytest.approx(1.0))
+    assert by["probes"]["max_depth_rv"] == pytest.approx(2.0)
+    depth = {(r["a"], r["b"]): r["depth_m"] for r in a["examples"]}
+    assert depth[(0, 2)] == pytest.approx(1.0) and (0, 1) not in depth   # 0.2 m: a wall
+    none = fence_audit(cx, pos, wm.walls, 1.0, 0.75, np.zeros_like(covered), raster)
+    assert none["by_why"]["probe_clear"]["room_uncovered"] == 1
+    assert none["by_why"]["probes"]["room_uncovered"] == 2
+    # both triangles' apexes on one side is what makes a side open: a lone edge has none
+    lone = Complex(vertices=[0, 1], occupants=[10, 11], edges=[0, 1], triangles=[],
+                   obstacle=[0], certified=True, state="certified")
+    assert fence_audit(lone, pos, wm.walls, 1.0, 0.75)["by_why"] == {}

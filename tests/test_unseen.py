@@ -43,6 +43,12 @@ def test_one_map_runs_the_swarm_to_a_certificate_ground_truth_agrees_with(tmp_pa
                           dict(index=4, error="boom")])
     assert (s["certified"], s["errors"], s["not_certified"], s["false_certificates"]) == \
         (1, 1, [3], 0)
+    # every side the certificate rests on is audited by ground truth, per reason
+    assert row["fence_audit"] and sum(a["sides"] for a in row["fence_audit"].values()) > 0
+    assert s["closed_sides"] == {
+        why: dict(sides=a["sides"], room_behind=a["room_behind"],
+                  room_uncovered=a["room_uncovered"], maps=1)
+        for why, a in row["fence_audit"].items()}
 
 
 @pytest.mark.parametrize("argv", [["--maps", "0"], ["--jobs", "0"], ["--ros", "-1"]])

@@ -157,3 +157,24 @@ def test_map_from_world_info_round_trip():
     assert np.array_equal(wm2.boundary, wm.boundary) and len(wm2.obstacles) == 4
     assert wm2.free_area == wm.free_area and np.array_equal(wm2.sources, wm.sources)
     assert np.array_equal(wm2.walls, wm.walls)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 10_000))
+def test_ray_lengths_stop_at_the_first_wall_a_fine_march_meets(seed):
+    """ray_lengths against a march in 1 mm steps over random segments: the ray's free run
+    ends in the first step that crosses a wall (or at the cap)."""
+    from swarmcover.world.maps import ray_lengths
+    rng = np.random.default_rng(seed)
+    walls = rng.uniform(-2, 2, (int(rng.integers(1, 8)), 4))
+    o = rng.uniform(-1, 1, (5, 2))
+    a = rng.uniform(-math.pi, math.pi, 5)
+    d = np.c_[np.cos(a), np.sin(a)]
+    got = ray_lengths(o, d, walls, 3.0)
+    t = np.arange(0.0, 3.0005, 0.001)
+    for k in range(5):
+        pts = o[k] + t[:, None] * d[k]
+        hit = segments_intersect(pts[:-1, None, :], pts[1:, None, :],
+                                 walls[None, :, 0:2], walls[None, :, 2:4]).any(1)
+        want = t[1:][np.argmax(hit)] if hit.any() else 3.0
+        assert got[k] == pytest.approx(want, abs=0.0011)

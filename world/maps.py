@@ -118,6 +118,29 @@ def segments_intersect(p0, p1, q0, q1) -> np.ndarray:
     return (d1 * d2 <= 0) & (d3 * d4 <= 0) & ~((d1 == 0) & (d2 == 0))
 
 
+def ray_lengths(origins, dirs, walls, cap: float, chunk: int = 1 << 21) -> np.ndarray:
+    """How far (m) each ray runs from ``origins`` (n, 2) along the unit ``dirs`` (n, 2)
+    before it meets a segment of ``walls`` (E, 4), at most ``cap``: (n,)."""
+    o = np.asarray(origins, float).reshape(-1, 2)
+    d = np.asarray(dirs, float).reshape(-1, 2)
+    out = np.full(len(o), float(cap))
+    if len(walls) == 0 or not len(out):
+        return out
+    a = walls[None, :, 0:2]
+    s = walls[None, :, 2:4] - a
+    step = max(1, chunk // len(walls))
+    for k in range(0, len(o), step):
+        ok, dk = o[k:k + step, None, :], d[k:k + step, None, :]
+        den = dk[..., 0] * s[..., 1] - dk[..., 1] * s[..., 0]         # cross(d, s)
+        ao = a - ok
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (ao[..., 0] * s[..., 1] - ao[..., 1] * s[..., 0]) / den  # along the ray
+            u = (ao[..., 0] * dk[..., 1] - ao[..., 1] * dk[..., 0]) / den  # along the wall
+        hit = (np.abs(den) > 1e-12) & (t >= 0.0) & (u >= 0.0) & (u <= 1.0)
+        out[k:k + step] = np.minimum(out[k:k + step], np.where(hit, t, np.inf).min(axis=1))
+    return out
+
+
 # --------------------------------------------------------------------------- wall index
 
 class SegmentGrid:
