@@ -113,6 +113,7 @@ class Deployer:
         self.stop_reason = ""
         self.final_pass = False
         self.uncertified_idle = 0
+        self._cut_off_logged: tuple | None = None   # the cut-off triangle last warned of
         self.no_push = 0                             # consecutive plans without a push
         self.stray_plans: dict[int, int] = {}        # robot -> plans in a row it was cut off
         self.pending_holds: dict[int, int] = {}      # new robot -> source vertex to hold
@@ -346,9 +347,11 @@ class Deployer:
                 # robots cut off from every source see one another: they stand where the
                 # complex does not reach, so "covered" cannot be claimed
                 plan.certified = False
-                log.warning("cycle %d: robots %s, cut off from every source, see one "
-                            "another: no certificate while the complex cannot count them",
-                            self.cycle, list(tri))
+                # warned once per triangle (it may stand for tens of cycles), then debug
+                (log.warning if tuple(tri) != self._cut_off_logged else log.debug)(
+                    "cycle %d: robots %s, cut off from every source, see one another: no "
+                    "certificate while the complex cannot count them", self.cycle, list(tri))
+                self._cut_off_logged = tuple(tri)
         self.out.add(PublishComplex(self._complex_msg(plan, now, "running")))
         if self._pending_failures and plan.certified:
             self.failures_healed += self._pending_failures
