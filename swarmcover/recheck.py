@@ -132,20 +132,28 @@ def recheck(cx, positions: dict | None = None, rv: float | None = None,
 SIDE_MARGIN = 0.05   # x rv: an apex nearer an edge's line than this is on neither side
 
 
-def _open_sides_left(el, tl, pts, fenced: set, margin: float) -> list[int]:
-    """Edges (indices into ``el``) that in the world have triangles clearly on one side
-    only (every apex more than ``margin`` off the edge's line, all on one side) and are
-    in ``fenced`` (obstacle or exception) neither: sides nobody closed."""
-    P = np.asarray(pts, float).reshape(-1, 2)
+def _apex_sides(tl, P: np.ndarray, margin: float) -> dict[tuple[int, int], set]:
+    """For each edge (a, b), a < b, of the triangles ``tl`` (rows of indices into the
+    positions ``P``): the sides of the line a -> b its triangles' apexes lie on (+1 left,
+    -1 right, 0 within ``margin`` of the line). A NaN position counts as 0."""
     side: dict[tuple[int, int], set] = {}
-    for t in tl.tolist():
+    for t in np.asarray(tl, np.int64).reshape(-1, 3).tolist():
         for i in range(3):
             u, v, w = t[i], t[(i + 1) % 3], t[(i + 2) % 3]
             a, b = min(u, v), max(u, v)
             d = P[b] - P[a]
             ln = math.hypot(*d)
             c = (d[0] * (P[w] - P[a])[1] - d[1] * (P[w] - P[a])[0]) / ln if ln > 0 else 0.0
-            side.setdefault((a, b), set()).add(0 if abs(c) <= margin else (1 if c > 0 else -1))
+            side.setdefault((a, b), set()).add(
+                0 if not abs(c) > margin else (1 if c > 0 else -1))
+    return side
+
+
+def _open_sides_left(el, tl, pts, fenced: set, margin: float) -> list[int]:
+    """Edges (indices into ``el``) that in the world have triangles clearly on one side
+    only (every apex more than ``margin`` off the edge's line, all on one side) and are
+    in ``fenced`` (obstacle or exception) neither: sides nobody closed."""
+    side = _apex_sides(tl, np.asarray(pts, float).reshape(-1, 2), margin)
     out = []
     for k, (a, b) in enumerate(el.tolist()):
         s = side.get((min(a, b), max(a, b)))
@@ -171,34 +179,31 @@ def fence_audit(cx, positions: dict, walls, rv: float, room_depth: float,
     the deepest ray (or short of the wall it meets) in ``covered`` (the summary's coverage
     raster, ``raster``'s cells) or not. ``examples`` lists up to 20 room-behind sides."""
     from swarmcover.world.maps import ray_lengths
-    occ = dict(zip(cx.vertices, cx.occupants))
+    verts = list(cx.vertices)
+    loc = {v: i for i, v in enumerate(verts)}
+    P = np.array([positions.get(o, (math.nan, math.nan)) for o in cx.occupants],
+                 float).reshape(-1, 2)
     E = np.asarray(cx.edges, np.int64).reshape(-1, 2)
     why = {int(k): str(w) for k, w in zip(getattr(cx, "inferred", None) or (),
                                           getattr(cx, "inferred_why", None) or ())}
-    apex: dict[tuple[int, int], list[int]] = {}
-    for t in np.asarray(cx.triangles, np.int64).reshape(-1, 3).tolist():
-        for i in range(3):
-            a, b = sorted((t[i], t[(i + 1) % 3]))
-            apex.setdefault((a, b), []).append(t[(i + 2) % 3])
+    try:
+        tl = [[loc[int(x)] for x in t]
+              for t in np.asarray(cx.triangles, np.int64).reshape(-1, 3).tolist()]
+    except KeyError:
+        tl = []                       # a malformed message: recheck says why; no audit
+    apex = _apex_sides(tl, P, SIDE_MARGIN * rv)
     rows = []
     for k in sorted(set(int(x) for x in cx.obstacle)):
-        if not 0 <= k < len(E):
+        if not 0 <= k < len(E) or int(E[k][0]) not in loc or int(E[k][1]) not in loc:
             continue
         a, b = (int(x) for x in E[k])
-        pa, pb = positions.get(occ.get(a, -1)), positions.get(occ.get(b, -1))
-        if pa is None or pb is None:
-            continue
-        pa, pb = np.asarray(pa, float), np.asarray(pb, float)
+        ia, ib = loc[a], loc[b]
+        pa, pb = (P[ia], P[ib]) if ia < ib else (P[ib], P[ia])
         d = pb - pa
         ln = float(np.hypot(*d))
-        if ln <= 0:
-            continue
-        signs = set()
-        for c in apex.get((min(a, b), max(a, b)), ()):
-            pc = positions.get(occ.get(c, -1))
-            if pc is not None:
-                cr = (d[0] * (pc[1] - pa[1]) - d[1] * (pc[0] - pa[0])) / ln
-                signs.add(0 if abs(cr) <= SIDE_MARGIN * rv else (1 if cr > 0 else -1))
+        if not ln > 0:
+            continue                  # a robot not in the world, or two on one point
+        signs = apex.get((min(ia, ib), max(ia, ib)), set())
         if len(signs) != 1 or 0 in signs:
             continue                  # no triangle, or triangles on both sides: not one-sided
         normal = -next(iter(signs)) * np.array([-d[1], d[0]]) / ln
