@@ -63,12 +63,17 @@ def _grid(W: float, H: float):
     return xx, yy
 
 
-def _keep_component(free: np.ndarray, at) -> np.ndarray:
-    """The connected free part holding point ``at`` (x, y), with a 0.2 m solid rim."""
+def _keep_component(free: np.ndarray, at=None) -> np.ndarray:
+    """The connected free part holding point ``at`` (x, y; None: the largest part), with
+    a 0.2 m solid rim."""
     free = free.copy()
     free[:4, :] = free[-4:, :] = False
     free[:, :4] = free[:, -4:] = False
-    lab, _ = ndimage.label(free)
+    lab, n = ndimage.label(free)
+    if at is None:
+        if n == 0:
+            return free
+        return lab == 1 + int(np.argmax(ndimage.sum(free, lab, range(1, n + 1))))
     return lab == lab[int(at[1] / RES), int(at[0] / RES)]
 
 
@@ -90,12 +95,7 @@ def turn_raster(free: np.ndarray, deg: float) -> np.ndarray:
     inside = (i >= 0) & (i < nx) & (j >= 0) & (j < ny)
     out = np.zeros(xx.shape, bool)
     out[inside] = free[j[inside], i[inside]]
-    lab, n = ndimage.label(out)
-    if n == 0:
-        return out
-    big = 1 + int(np.argmax(ndimage.sum(out, lab, range(1, n + 1))))
-    jj, ii = np.argwhere(lab == big)[0]
-    return _keep_component(lab == big, ((ii + 0.5) * RES, (jj + 0.5) * RES))
+    return _keep_component(out)
 
 
 def cave(rng) -> tuple[np.ndarray, str]:
