@@ -20,6 +20,12 @@ looks at the swarm it certifies, with the world's ground truth:
   passes, and what the spec's global greedy (remove a robot off the fence while
   D x = z stays solvable over GF(2) on the triangles left and the 1-skeleton stays
   connected) would remove beyond it on the last certified complex.
+* **fence thin** (issue 19 item 3, an oracle): the wall robots an oracle could still take
+  out of that complex, one at a time, where the fence can be rerouted across the side
+  between a robot's two fence neighbours and ground truth puts a wall within the no-room
+  depth behind that side (:func:`fence_thin`): an upper bound on what thinning crowded
+  wall rows after certification could free, and ``robots_per_bound_thinned`` what it
+  would leave. No sweep of the new side is driven: the run's decisions are unchanged.
 
 The redundancy numbers come from wrapping coordinator.topology.redundancy.find_redundant
 (experiment code observing the coordinator; the run's decisions are unchanged).
@@ -87,6 +93,99 @@ def global_extra(cx, fence, cert, protected) -> list[int]:
     return removed
 
 
+def fence_thin(cx, cert, protected, pos: dict, walls, room_depth: float) -> list[int]:
+    """Fence robots (node ids) an oracle could still take out of the last certified
+    complex ``cx`` (issue 19 item 3: what crowded wall rows cost), each while the rest
+    stays certifiable once the new side is found closed.
+
+    A robot c whose target-cycle edges are exactly uc and cw, with uw a Rips edge too, can
+    leave when z' = z + uc + cw + uw (the fence rerouted across uw) stays in the span of
+    the surviving triangles' boundaries over GF(2), the surviving 1-skeleton stays
+    connected, and the new side uw has no room behind it by ground truth: rays from 9
+    points along it, on c's side, meet a wall of ``walls`` (E, 4) within ``room_depth`` (m)
+    (what a sweep of that side would have to find; none was driven: this is an upper
+    bound on what thinning the walls can free, not a rule). ``pos``: node id -> (x, y).
+    Greedy, most crowded first (the shorter of uc and cw); repeated until none leaves."""
+    from swarmcover.coordinator.topology.gf2 import in_span
+    from swarmcover.world.maps import ray_lengths
+    from swarmcover.recheck import AUDIT_FRACTIONS
+    n = cx.n
+    ids = cx.ids
+    E = cx.edges
+    eidx = {(int(min(a, b)), int(max(a, b))): k for k, (a, b) in enumerate(E.tolist())}
+    zset = {int(e) for e in np.asarray(cert.z).tolist()}
+    tri = cx.triangles
+    cols = [(1 << a) | (1 << b) | (1 << c) for a, b, c in cx.tri_edges.tolist()]
+    keep = np.zeros(n, bool)
+    prot = [p for p in protected if p in cx]
+    if prot:
+        keep[cx.index(prot)] = True
+    alive = np.ones(n, bool)
+    u_, v_ = E[:, 0], E[:, 1]
+    P = np.array([pos.get(int(i), (math.nan, math.nan)) for i in ids.tolist()], float)
+
+    def candidates():
+        inc: dict[int, list[int]] = {}
+        for e in zset:
+            for x in E[e].tolist():
+                inc.setdefault(int(x), []).append(e)
+        out = []
+        for c, es in inc.items():
+            if len(es) != 2 or keep[c] or not alive[c] or not np.isfinite(P[c]).all():
+                continue
+            (a,) = set(E[es[0]].tolist()) - {c}
+            (b,) = set(E[es[1]].tolist()) - {c}
+            k = eidx.get((min(a, b), max(a, b)))
+            if k is None or k in zset or not (alive[a] and alive[b]):
+                continue
+            crowd = min(float(np.hypot(*(P[a] - P[c]))), float(np.hypot(*(P[b] - P[c]))))
+            out.append((crowd, c, a, b, es, k))
+        return sorted(out)
+
+    def shallow(a, b, c) -> bool:
+        d = P[b] - P[a]
+        ln = float(np.hypot(*d))
+        if not ln > 0:
+            return False
+        nrm = np.array([-d[1], d[0]]) / ln
+        if float(np.dot(P[c] - P[a], nrm)) < 0:
+            nrm = -nrm
+        starts = P[a] + np.outer(AUDIT_FRACTIONS, d)
+        depth = ray_lengths(starts, np.tile(nrm, (len(starts), 1)), walls, 2.0 * room_depth)
+        return bool(depth.max() <= room_depth)
+
+    removed: list[int] = []
+    progress = True
+    while progress:
+        progress = False
+        for _, c, a, b, es, k in candidates():
+            if not alive[c] or not (alive[a] and alive[b]) or not set(es) <= zset:
+                continue
+            if not shallow(a, b, c):
+                continue
+            z2 = zset ^ {es[0], es[1], k}
+            alive[c] = False
+            mask = 0
+            for e in z2:
+                mask |= 1 << e
+            ok = in_span([cols[t] for t in np.nonzero(alive[tri].all(axis=1))[0].tolist()], mask)
+            if ok:
+                ke = alive[u_] & alive[v_]
+                idx = np.nonzero(alive)[0]
+                re = -np.ones(n, int)
+                re[idx] = np.arange(idx.size)
+                g = csr_matrix((np.ones(int(ke.sum())), (re[u_[ke]], re[v_[ke]])),
+                               shape=(idx.size, idx.size))
+                ok = connected_components(g, directed=False)[0] == 1
+            if ok:
+                zset = z2
+                removed.append(int(ids[c]))
+                progress = True
+            else:
+                alive[c] = True
+    return removed
+
+
 def _stats(lengths: list[float], rv: float) -> dict:
     a = np.asarray(lengths, float) / rv
     if not a.size:
@@ -101,7 +200,7 @@ def run(config: str, seed: int, timeout: float) -> dict:
     from swarmcover.run import default_robots_max
     from swarmcover.simloop import SimLoop
     from swarmcover.world.config import load_config
-    from swarmcover.world.groundtruth import ring_lengths
+    from swarmcover.world.groundtruth import euler_bound, ring_lengths
     from swarmcover.world.maps import build_map
 
     cfg = load_config(config)
@@ -167,6 +266,9 @@ def run(config: str, seed: int, timeout: float) -> dict:
     wall_row = sum(max(3, math.ceil(length / d0)) for length in ring_lengths(sim.wm))
     extra = (global_extra(last["cx"], last["fence"], last["cert"], last["protected"])
              if last else None)
+    thin = (fence_thin(last["cx"], last["cert"], last["protected"], pos, sim.wm.walls,
+                       sim.ccfg.wall_keep) if last else None)
+    bound = euler_bound(sim.wm, rv)["robots"]
     return {
         "name": cfg.name, "seed": seed, "certified": bool(res.certified), "robots": len(V),
         "robots_spawned": int(res.robots_spawned),
@@ -178,6 +280,11 @@ def run(config: str, seed: int, timeout: float) -> dict:
         "wall_origin": origin,
         "redundant_over_run": len(flagged), "redundancy_passes": passes[0],
         "global_greedy_extra": None if extra is None else len(extra),
+        "euler_bound": int(bound),
+        "fence_thin": None if thin is None else len(thin),
+        "robots_per_bound": round(len(V) / bound, 3) if bound else None,
+        "robots_per_bound_thinned": (round((len(V) - len(thin)) / bound, 3)
+                                     if bound and thin is not None else None),
         "wall_s": round(time.monotonic() - t0, 1),
     }
 
@@ -186,8 +293,8 @@ def main(argv=None) -> int:
     runs = run_configs(__doc__.split("\n\n")[0], run, argv)
     print("| config | seed | robots (spawned) | wall / row at d0 | interior | nn wall / interior (rv) "
           "| ww edges mean, short | wall origin wall/opening/room/other | redundant over run "
-          "| global extra |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "| global extra | fence thin (oracle) | robots / bound, thinned |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in runs:
         ww, o = r["edges"]["ww"], r["wall_origin"]
         print(f"| {r['name']} | {r['seed']} | {r['robots']} ({r['robots_spawned']}) | {r['wall_vertices']} / "
@@ -195,7 +302,8 @@ def main(argv=None) -> int:
               f"{r['nn_interior_median_rv']} | {ww.get('mean')}, {ww.get('short', 0)} of "
               f"{ww['n']} | {o['wall']}/{o['opening']}/{o['room']}/{o['other']} | "
               f"{r['redundant_over_run']} ({r['redundancy_passes']} passes) | "
-              f"{r['global_greedy_extra']} |")
+              f"{r['global_greedy_extra']} | {r['fence_thin']} | {r['robots_per_bound']} -> "
+              f"{r['robots_per_bound_thinned']} |")
     print(json.dumps({"bench": "robots", "runs": runs}))
     return 0
 
