@@ -56,17 +56,33 @@ MATCH_M = 0.2          # a wall vertex's origin: a drive's end within this (m)
 ORIGINS = ("wall", "opening", "room")
 
 
+def _still_certified(cx, alive: np.ndarray, cols: list[int], zmask: int) -> bool:
+    """Whether the complex ``cx`` restricted to the vertices ``alive`` still certifies the
+    target cycle ``zmask`` (an edge bit mask): z in the span of the surviving triangles'
+    boundaries (``cols``, one bit mask per triangle) over GF(2), and the surviving
+    1-skeleton connected."""
+    from swarmcover.coordinator.topology.gf2 import in_span
+    n, u, v = cx.n, cx.edges[:, 0], cx.edges[:, 1]
+    if not in_span([cols[t] for t in np.nonzero(alive[cx.triangles].all(axis=1))[0].tolist()],
+                   zmask):
+        return False
+    ke = alive[u] & alive[v]
+    idx = np.nonzero(alive)[0]
+    re = -np.ones(n, int)
+    re[idx] = np.arange(idx.size)
+    g = csr_matrix((np.ones(int(ke.sum())), (re[u[ke]], re[v[ke]])), shape=(idx.size, idx.size))
+    return connected_components(g, directed=False)[0] == 1
+
+
 def global_extra(cx, fence, cert, protected) -> list[int]:
     """Robots (node indices) the spec's global greedy (5.3 step 5) removes from ``cx``
     beyond the fence vertices, ``cert.z``'s vertices and ``protected``: one at a time
     (highest degree first), kept out while z stays in the span of the surviving
     triangles' boundaries and the surviving 1-skeleton is connected."""
-    from swarmcover.coordinator.topology.gf2 import in_span
     n, z = cx.n, np.asarray(cert.z)
     zmask = 0
     for e in z.tolist():
         zmask |= 1 << int(e)
-    tri = cx.triangles
     cols = [(1 << a) | (1 << b) | (1 << c) for a, b, c in cx.tri_edges.tolist()]
     keep = np.zeros(n, bool)
     ids = [p for p in protected if p in cx] + [v for v in fence.fence_vertices if v in cx]
@@ -75,20 +91,12 @@ def global_extra(cx, fence, cert, protected) -> list[int]:
     if z.size:
         keep[cx.edges[z].ravel()] = True
     alive = np.ones(n, bool)
-    u, v = cx.edges[:, 0], cx.edges[:, 1]
     removed = []
     for c in sorted(np.nonzero(~keep)[0].tolist(), key=lambda p: (-int(cx.degree[p]), p)):
         alive[c] = False
-        if in_span([cols[t] for t in np.nonzero(alive[tri].all(axis=1))[0].tolist()], zmask):
-            ke = alive[u] & alive[v]
-            idx = np.nonzero(alive)[0]
-            re = -np.ones(n, int)
-            re[idx] = np.arange(idx.size)
-            g = csr_matrix((np.ones(int(ke.sum())), (re[u[ke]], re[v[ke]])),
-                           shape=(idx.size, idx.size))
-            if connected_components(g, directed=False)[0] == 1:
-                removed.append(c)
-                continue
+        if _still_certified(cx, alive, cols, zmask):
+            removed.append(c)
+            continue
         alive[c] = True
     return removed
 
@@ -106,7 +114,6 @@ def fence_thin(cx, cert, protected, pos: dict, walls, room_depth: float) -> list
     (what a sweep of that side would have to find; none was driven: this is an upper
     bound on what thinning the walls can free, not a rule). ``pos``: node id -> (x, y).
     Greedy, most crowded first (the shorter of uc and cw); repeated until none leaves."""
-    from swarmcover.coordinator.topology.gf2 import in_span
     from swarmcover.world.maps import ray_lengths
     from swarmcover.recheck import AUDIT_FRACTIONS
     n = cx.n
@@ -114,14 +121,12 @@ def fence_thin(cx, cert, protected, pos: dict, walls, room_depth: float) -> list
     E = cx.edges
     eidx = {(int(min(a, b)), int(max(a, b))): k for k, (a, b) in enumerate(E.tolist())}
     zset = {int(e) for e in np.asarray(cert.z).tolist()}
-    tri = cx.triangles
     cols = [(1 << a) | (1 << b) | (1 << c) for a, b, c in cx.tri_edges.tolist()]
     keep = np.zeros(n, bool)
     prot = [p for p in protected if p in cx]
     if prot:
         keep[cx.index(prot)] = True
     alive = np.ones(n, bool)
-    u_, v_ = E[:, 0], E[:, 1]
     P = np.array([pos.get(int(i), (math.nan, math.nan)) for i in ids.tolist()], float)
 
     def candidates():
@@ -165,19 +170,7 @@ def fence_thin(cx, cert, protected, pos: dict, walls, room_depth: float) -> list
                 continue
             z2 = zset ^ {es[0], es[1], k}
             alive[c] = False
-            mask = 0
-            for e in z2:
-                mask |= 1 << e
-            ok = in_span([cols[t] for t in np.nonzero(alive[tri].all(axis=1))[0].tolist()], mask)
-            if ok:
-                ke = alive[u_] & alive[v_]
-                idx = np.nonzero(alive)[0]
-                re = -np.ones(n, int)
-                re[idx] = np.arange(idx.size)
-                g = csr_matrix((np.ones(int(ke.sum())), (re[u_[ke]], re[v_[ke]])),
-                               shape=(idx.size, idx.size))
-                ok = connected_components(g, directed=False)[0] == 1
-            if ok:
+            if _still_certified(cx, alive, cols, sum(1 << e for e in z2)):
                 zset = z2
                 removed.append(int(ids[c]))
                 progress = True
