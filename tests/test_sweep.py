@@ -671,3 +671,29 @@ def test_the_final_pass_keeps_the_robot_that_alone_holds_a_room(room, all_leave)
     assert leave == ({13} if room == "lone" else {13, 14})
     (cx_msg,) = [a.complex for a in acts if isinstance(a, PublishComplex)]
     assert cx_msg.certified and cx_msg.redundant == ([3] if room == "lone" else [3, 4])
+
+
+def test_a_sweep_goes_round_its_end_to_the_next_sides_perpendicular():
+    """At a convex turn of a wall row (robots 0-1-2, the row bending up 30 deg at 1), the
+    side below 0-1 is swept from 1 past 1's perpendicular to that of 1-2 (itself a wall
+    candidate), plus sweep_margin: the 30-deg wedge between them is swept from both sides.
+    The row's outer ends go round to their frontiers' perpendiculars (0-3, 2-4: 120 deg on,
+    capped at 90 deg, along the edge's line)."""
+    c30, s30 = math.cos(math.pi / 6), math.sin(math.pi / 6)
+    P = np.array([[0.0, 0.0], [S, 0.0], [S + S * c30, S * s30],
+                  [S / 2, S * math.sqrt(3) / 2], [S, S]])
+    cx = build_complex({i: {"neighbours": _nbrs(P, i)} for i in range(len(P))})
+    ev = Evidence()
+    for _ in range(2):
+        f = detect_fence(cx, **ev.fence_kwargs())
+        for v in (0, 1, 2):
+            for d in f.deployments.get(v, ()):
+                if d.edge in ((0, 1), (1, 2)) and d.kind == "edge":
+                    ev.record(d, touched=True)
+    f = detect_fence(cx, **ev.fence_kwargs())
+    stops = {(d.vertex, d.edge): d.sweep_stop for d in _sweeps(f)}
+    margin = TopologyParams().sweep_margin
+    assert stops[(1, (0, 1))] == pytest.approx(math.radians(30) + margin, abs=1e-6)
+    assert stops[(1, (1, 2))] == pytest.approx(math.radians(30) + margin, abs=1e-6)
+    assert stops[(0, (0, 1))] == pytest.approx(math.pi / 2)
+    assert stops[(2, (1, 2))] == pytest.approx(math.pi / 2)
