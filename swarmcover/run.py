@@ -189,6 +189,26 @@ def _deploy_spacing(cfg) -> float:
     return _coordinator_config(cfg).d0
 
 
+# the packages a run's numbers depend on (physics, geometry, linear algebra, the bus): the
+# same code and seed gave 2,216 and 2,249 robots over one campaign in two sessions whose
+# package versions were not recorded (README, "Issue 19's targets today")
+SOFTWARE = ("numpy", "scipy", "pymunk", "eclipse-zenoh", "msgspec", "msgpack", "contourpy")
+
+
+def software_versions() -> dict:
+    """{"python": ..., "swarmcover": ..., package: version or None} for summary.json."""
+    import platform
+    from importlib import metadata
+    from swarmcover import __version__
+    out = {"python": platform.python_version(), "swarmcover": __version__}
+    for name in SOFTWARE:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = None
+    return out
+
+
 def compute_summary(cfg, wmap, truth: Truth | None, cx: Complex | None, extra: dict) -> dict:
     """Ground-truth numbers for summary.json (world positions, never seen by the swarm).
 
@@ -289,6 +309,7 @@ def compute_summary(cfg, wmap, truth: Truth | None, cx: Complex | None, extra: d
         from swarmcover.recheck import fence_audit
         out["fence_audit"] = fence_audit(cx, pos, wmap.walls, rv,
                                          _coordinator_config(cfg).wall_keep, covered, raster)
+    out["software"] = software_versions()
     out.update({k: v for k, v in extra.items() if k not in out})
     return out
 

@@ -62,6 +62,12 @@ def test_uncertified_summary_has_null_ratios_and_a_stop_reason():
     # nothing at all (the world died before a truth arrived) still gives a summary
     s = compute_summary(cfg, wm, None, None, dict(certified=False, stop_reason="world_died"))
     assert _strict(strict_json(s))["coverage"] == 0.0
+    # and says which software made it: the same code and seed can differ across versions
+    import numpy, pymunk, scipy
+    sw = _strict(strict_json(s))["software"]
+    assert (sw["numpy"], sw["scipy"], sw["pymunk"]) == (numpy.__version__, scipy.__version__,
+                                                          pymunk.version)
+    assert sw["python"].count(".") == 2 and sw["eclipse-zenoh"]
 
 
 def test_reachable_uncovered_finds_the_hole_a_false_certificate_hides():
