@@ -206,6 +206,15 @@ def software_versions() -> dict:
             out[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
             out[name] = None
+    # numpy picks its SIMD kernels by CPU, and their sums round differently: the widest
+    # x86 level (X86_V2..V4) or Arm's ASIMD this numpy runs with
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__ as feats
+        levels = [k for k in ("X86_V2", "X86_V3", "X86_V4", "ASIMD", "SVE") if feats.get(k)]
+        out["numpy_simd"] = levels[-1] if levels else "baseline"
+    except ImportError:
+        out["numpy_simd"] = None
+    out["machine"] = platform.machine()
     return out
 
 
