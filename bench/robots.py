@@ -114,8 +114,7 @@ def fence_thin(cx, cert, protected, pos: dict, walls, room_depth: float) -> list
     (what a sweep of that side would have to find; none was driven: this is an upper
     bound on what thinning the walls can free, not a rule). ``pos``: node id -> (x, y).
     Greedy, most crowded first (the shorter of uc and cw); repeated until none leaves."""
-    from swarmcover.world.maps import ray_lengths
-    from swarmcover.recheck import AUDIT_FRACTIONS
+    from swarmcover.recheck import side_depths
     n = cx.n
     ids = cx.ids
     E = cx.edges
@@ -155,9 +154,7 @@ def fence_thin(cx, cert, protected, pos: dict, walls, room_depth: float) -> list
         nrm = np.array([-d[1], d[0]]) / ln
         if float(np.dot(P[c] - P[a], nrm)) < 0:
             nrm = -nrm
-        starts = P[a] + np.outer(AUDIT_FRACTIONS, d)
-        depth = ray_lengths(starts, np.tile(nrm, (len(starts), 1)), walls, 2.0 * room_depth)
-        return bool(depth.max() <= room_depth)
+        return bool(side_depths(P[a], P[b], nrm, walls, 2.0 * room_depth)[1].max() <= room_depth)
 
     removed: list[int] = []
     progress = True

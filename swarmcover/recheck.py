@@ -165,6 +165,15 @@ def _open_sides_left(el, tl, pts, fenced: set, margin: float) -> list[int]:
 AUDIT_FRACTIONS = tuple(k / 10 for k in range(1, 10))   # where along an edge rays start
 
 
+def side_depths(pa, pb, normal, walls, cap: float):
+    """(starts (9, 2), depths (9,)): how far (m, at most ``cap``) the free space runs from
+    9 points along the side pa-pb (``AUDIT_FRACTIONS``) along the unit ``normal`` before a
+    segment of ``walls`` (E, 4)."""
+    from swarmcover.world.maps import ray_lengths
+    starts = np.asarray(pa, float) + np.outer(AUDIT_FRACTIONS, np.asarray(pb, float) - pa)
+    return starts, ray_lengths(starts, np.tile(normal, (len(starts), 1)), walls, cap)
+
+
 def fence_audit(cx, positions: dict, walls, rv: float, room_depth: float,
                 covered=None, raster=None) -> dict:
     """Ground truth on the claim each closed fence side makes (pure, no I/O).
@@ -178,7 +187,6 @@ def fence_audit(cx, positions: dict, walls, rv: float, room_depth: float,
     sides, room_behind, and of those how many have the point 0.9 rv into the room along
     the deepest ray (or short of the wall it meets) in ``covered`` (the summary's coverage
     raster, ``raster``'s cells) or not. ``examples`` lists up to 20 room-behind sides."""
-    from swarmcover.world.maps import ray_lengths
     verts = list(cx.vertices)
     loc = {v: i for i, v in enumerate(verts)}
     P = np.array([positions.get(o, (math.nan, math.nan)) for o in cx.occupants],
@@ -207,8 +215,7 @@ def fence_audit(cx, positions: dict, walls, rv: float, room_depth: float,
         if len(signs) != 1 or 0 in signs:
             continue                  # no triangle, or triangles on both sides: not one-sided
         normal = -next(iter(signs)) * np.array([-d[1], d[0]]) / ln
-        starts = pa + np.outer(AUDIT_FRACTIONS, d)
-        depths = ray_lengths(starts, np.tile(normal, (len(starts), 1)), walls, 2.0 * rv)
+        starts, depths = side_depths(pa, pb, normal, walls, 2.0 * rv)
         j = int(np.argmax(depths))
         row = dict(a=a, b=b, why=why.get(k, "probes"), depth_m=float(depths[j]))
         if row["depth_m"] > room_depth and covered is not None and raster is not None:

@@ -68,6 +68,9 @@ def test_uncertified_summary_has_null_ratios_and_a_stop_reason():
     assert (sw["numpy"], sw["scipy"], sw["pymunk"]) == (numpy.__version__, scipy.__version__,
                                                           pymunk.version)
     assert sw["python"].count(".") == 2 and sw["eclipse-zenoh"]
+    import platform
+    assert sw["machine"] == platform.machine()
+    assert sw["numpy_simd"] in ("X86_V2", "X86_V3", "X86_V4", "ASIMD", "SVE", "baseline")
 
 
 def test_reachable_uncovered_finds_the_hole_a_false_certificate_hides():
