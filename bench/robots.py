@@ -10,9 +10,13 @@ looks at the swarm it certifies, with the world's ground truth:
   every wall ring at spacing d0 would need (sum of max(3, ceil(length / d0))), so
   ``wall_vertices - wall_row`` is what the walls cost beyond a spaced row.
 * **by origin**: how each wall vertex got there, from the agents' Status messages (the
-  bus): the last test drive that ended done near where it stands (within 0.2 m) with
+  bus): the test drive that ended done nearest where it stands (within 0.2 m), with
   reason ``wall`` (a touch far enough out: the robot kept there), ``opening`` or ``room``
-  (a wall sweep's: agents/sweep.py); ``other`` when none did (lattice deploys, pushes).
+  (a wall sweep's: agents/sweep.py), or ``clear`` (a deployment's drive that touched
+  nothing); ``other`` when none did. ``no_lattice_point`` counts, of those, the drives of
+  deployments the planner found no free lattice point for (JobSpec.placed ``spec``: the
+  spec's direction at the lattice spacing), read off the planner's typed output by a
+  wrapper, like the redundancy numbers below.
 * **spawned**: robots the run started; those not in the final swarm were sent away
   (redundant at the end, or cut off from every source) or failed.
 * **redundancy** (spec 5.3-5.4): the distinct vertices the coordinator's local link test
@@ -53,7 +57,7 @@ from bench.common import run_configs  # noqa: E402
 WALL_RV = 0.5          # a vertex within this of a wall (x rv) is a wall vertex
 SHORT_RV = 0.6         # an edge shorter than this (x rv) is counted short
 MATCH_M = 0.2          # a wall vertex's origin: a drive's end within this (m)
-ORIGINS = ("wall", "opening", "room")
+ORIGINS = ("wall", "opening", "room", "clear")
 
 
 def _still_certified(cx, alive: np.ndarray, cols: list[int], zmask: int) -> bool:
@@ -186,6 +190,7 @@ def _stats(lengths: list[float], rv: float) -> dict:
 
 
 def run(config: str, seed: int, timeout: float) -> dict:
+    import swarmcover.coordinator.planner as planner
     import swarmcover.coordinator.topology.redundancy as red
     from swarmcover.run import default_robots_max
     from swarmcover.simloop import SimLoop
@@ -197,7 +202,12 @@ def run(config: str, seed: int, timeout: float) -> dict:
     cfg, _, _ = default_robots_max(cfg, build_map(cfg), "")
     sim = SimLoop(cfg, seed=seed)
     rv = cfg.rv
-    ends: list[tuple[str, np.ndarray]] = []      # (reason, where) of drives that ended done
+    ends: list[tuple[str, bool, np.ndarray]] = []   # (reason, no lattice point, where) of
+    #                                                 drives that ended done
+    placed: dict[int, str] = {}                      # robot -> JobSpec.placed of its last job
+    drives: dict[tuple[int, int], str] = {}          # (robot, task_id) of each test drive ->
+    #                                                 its job's JobSpec.placed ("" if none)
+    seen: set[tuple[int, int]] = set()               # drives whose end is booked
     flagged: set[int] = set()
     last: dict = {}
     passes = [0]
@@ -205,15 +215,40 @@ def run(config: str, seed: int, timeout: float) -> dict:
     sync = sim.coord.sync
     add_status = sync.add_status
 
+    place = planner._place_on_lattice
+
+    def observed_place(snap, jobs, *a, **kw):
+        out = place(snap, jobs, *a, **kw)
+        for job in jobs:
+            r = snap.occupant.get(job.path[-1])
+            if job.placed and r is not None:
+                placed[r] = job.placed
+        return out
+
+    apply = sim._apply
+
+    def observed_apply(actions):
+        done, tasks = apply(actions)
+        for rid, ts in tasks.items():
+            for t in ts:
+                if t.kind == "test_drive":
+                    drives[(rid, t.task_id)] = "" if t.sweep_side else placed.pop(rid, "")
+        return done, tasks
+
     def on_status(st):
-        if st.task_state == "done" and st.reason in ORIGINS:
+        key = (st.robot, st.task_id)
+        why = st.reason or "clear"
+        if st.task_state == "done" and key in drives and key not in seen and why in ORIGINS:
+            seen.add(key)
             ids, pos, _ = sim.physics.state()
             k = list(ids).index(st.robot) if st.robot in ids else -1
             if k >= 0:
-                ends.append((st.reason, np.asarray(pos[k][:2], float)))
+                ends.append((why, drives[key] == "spec", np.asarray(pos[k][:2], float)))
         return add_status(st)
 
     sync.add_status = on_status
+    sim._apply = observed_apply
+    planner._place_on_lattice = observed_place
     find = red.find_redundant
 
     def observed(cx, fence, certificate=None, protected=()):
@@ -230,6 +265,7 @@ def run(config: str, seed: int, timeout: float) -> dict:
         res = sim.run(max_sim_s=20000.0, max_wall_s=timeout)
     finally:
         red.find_redundant = find
+        planner._place_on_lattice = place
     cx = res.final
     occ = {v: r for v, r in zip(cx.vertices, cx.occupants) if r >= 0 and r in res.positions}
     pos = {v: np.asarray(res.positions[r][:2], float) for v, r in occ.items()}
@@ -246,12 +282,17 @@ def run(config: str, seed: int, timeout: float) -> dict:
     np.fill_diagonal(D, np.inf)
     nn = D.min(axis=1) / rv
     wmask = np.array([wall[v] for v in V])
-    origin = {k: 0 for k in (*ORIGINS, "other")}
+    origin = {k: 0 for k in (*ORIGINS, "other", "no_lattice_point")}
     for v in V:
         if not wall[v]:
             continue
-        best = min(((float(np.hypot(*(w - pos[v]))), why) for why, w in ends), default=None)
-        origin[best[1] if best is not None and best[0] <= MATCH_M else "other"] += 1
+        best = min(((float(np.hypot(*(w - pos[v]))), why, spec) for why, spec, w in ends),
+                   default=None, key=lambda e: e[0])
+        if best is not None and best[0] <= MATCH_M:
+            origin[best[1]] += 1
+            origin["no_lattice_point"] += int(best[2])
+        else:
+            origin["other"] += 1
     d0 = sim.ccfg.d0
     wall_row = sum(max(3, math.ceil(length / d0)) for length in ring_lengths(sim.wm))
     extra = (global_extra(last["cx"], last["fence"], last["cert"], last["protected"])
@@ -282,7 +323,8 @@ def run(config: str, seed: int, timeout: float) -> dict:
 def main(argv=None) -> int:
     runs = run_configs(__doc__.split("\n\n")[0], run, argv)
     print("| config | seed | robots (spawned) | wall / row at d0 | interior | nn wall / interior (rv) "
-          "| ww edges mean, short | wall origin wall/opening/room/other | redundant over run "
+          "| ww edges mean, short | wall origin wall/opening/room/clear/other (no lattice point) "
+          "| redundant over run "
           "| global extra | fence thin (oracle) | robots / bound, thinned |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in runs:
@@ -290,7 +332,8 @@ def main(argv=None) -> int:
         print(f"| {r['name']} | {r['seed']} | {r['robots']} ({r['robots_spawned']}) | {r['wall_vertices']} / "
               f"{r['wall_row_at_d0']} | {r['interior_vertices']} | {r['nn_wall_median_rv']} / "
               f"{r['nn_interior_median_rv']} | {ww.get('mean')}, {ww.get('short', 0)} of "
-              f"{ww['n']} | {o['wall']}/{o['opening']}/{o['room']}/{o['other']} | "
+              f"{ww['n']} | {o['wall']}/{o['opening']}/{o['room']}/{o['clear']}/{o['other']} "
+              f"({o['no_lattice_point']}) | "
               f"{r['redundant_over_run']} ({r['redundancy_passes']} passes) | "
               f"{r['global_greedy_extra']} | {r['fence_thin']} | {r['robots_per_bound']} -> "
               f"{r['robots_per_bound_thinned']} |")

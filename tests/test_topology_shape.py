@@ -211,6 +211,8 @@ def test_the_planner_sends_new_robots_to_free_lattice_points():
             o = [x for x in job.frontier_edge if x != f][0]
             assert np.linalg.norm(P[o] - q) <= 0.97 + 1e-9           # sees both ends
         landed.append(q)
+        # the plan says how it chose the point (bench/robots.py books wall robots by it)
+        assert job.placed == ("lattice" if job.frontier_edge else "lattice_f"), job
     L = np.array(landed)
     if len(L) > 1:  # two pushes of one cycle never aim at the same point
         assert min(np.linalg.norm(L[i] - L[j]) for i in range(len(L))
@@ -232,6 +234,23 @@ def test_without_a_lattice_the_planner_keeps_the_spec_rule():
                       scale_correct=False, test_drive=True, next_vertex=100,
                       lattice_spacing=0.95)
     assert plan.jobs and all(j.distance is None for j in plan.jobs)
+    assert all(j.placed == "" for j in plan.jobs)
+
+
+def test_with_no_free_lattice_point_a_job_keeps_the_spec_direction_and_says_so():
+    from swarmcover.coordinator.topology.params import TopologyParams
+    from swarmcover.coordinator.planner import _place_on_lattice, plan_cycle
+    snap, P = _lattice_snapshot(0.95)
+    plan = plan_cycle(snap, TopologyParams(), cycle=1, redundancy=False, test_drive_failures={},
+                      previous_redundant=set(), protected=set(), max_paths=8,
+                      scale_correct=False, test_drive=True, next_vertex=100)
+    job = plan.jobs[0]
+    f, spec_dir = job.path[-1], job.direction
+    # drives from f failed every way round: every lattice point lies in a failed cone
+    walls = {f: [0.0, math.pi / 2, math.pi, -math.pi / 2]}
+    _place_on_lattice(snap, [job], 0.95, TopologyParams(), walls)
+    assert job.placed == "spec"
+    assert job.direction == spec_dir and job.distance == 0.95
 
 
 def _target(P, job):
