@@ -14,7 +14,7 @@ looks at the swarm it certifies, with the world's ground truth:
   reason ``wall`` (a touch far enough out: the robot kept there), ``opening`` or ``room``
   (a wall sweep's: agents/sweep.py), or ``clear`` (a deployment's drive that touched
   nothing); ``other`` when none did. ``no_lattice_point`` counts, of those, the drives of
-  deployments the planner found no free lattice point for (JobSpec.placed ``spec``: the
+  deployments the planner found no free lattice point for (JobSpec.placed ``Placed.SPEC``: the
   spec's direction at the lattice spacing), read off the planner's typed output by a
   wrapper, like the redundancy numbers below.
 * **spawned**: robots the run started; those not in the final swarm were sent away
@@ -231,8 +231,9 @@ def run(config: str, seed: int, timeout: float) -> dict:
         done, tasks = apply(actions)
         for rid, ts in tasks.items():
             for t in ts:
-                if t.kind == "test_drive":
-                    drives[(rid, t.task_id)] = "" if t.sweep_side else placed.pop(rid, "")
+                if t.kind == "test_drive":   # a deployment's drive keeps its robot at a
+                    # far touch (keep_after > 0); probes' and sweeps' never do
+                    drives[(rid, t.task_id)] = placed.pop(rid, "") if t.keep_after > 0 else ""
         return done, tasks
 
     def on_status(st):
@@ -243,7 +244,7 @@ def run(config: str, seed: int, timeout: float) -> dict:
             ids, pos, _ = sim.physics.state()
             k = list(ids).index(st.robot) if st.robot in ids else -1
             if k >= 0:
-                ends.append((why, drives[key] == "spec", np.asarray(pos[k][:2], float)))
+                ends.append((why, drives[key] == planner.Placed.SPEC, np.asarray(pos[k][:2], float)))
         return add_status(st)
 
     sync.add_status = on_status

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 import numpy as np
 
@@ -34,6 +35,13 @@ class Snapshot:
     sources: list[int] = field(default_factory=list)
     source_dirs: list[float] = field(default_factory=list)
     known: list[tuple[int, int, float]] = field(default_factory=list)
+
+
+class Placed(StrEnum):
+    """How :func:`_place_on_lattice` chose a job's new position (``JobSpec.placed``)."""
+    LATTICE = "lattice"        # a free lattice point within reach of both ends of the edge
+    LATTICE_F = "lattice_f"    # a free lattice point within reach of f alone
+    SPEC = "spec"              # no free lattice point: the spec's direction at the spacing
 
 
 @dataclass
@@ -78,11 +86,8 @@ class JobSpec:
     sweep_stop: float = 0.0
     sweep_side: int = 0
     sweep_edge: float = 0.0
-    placed: str = ""               # how _place_on_lattice chose the new position: "lattice"
-                                   # (a free lattice point within reach of both ends of the
-                                   # fence edge), "lattice_f" (of f alone), "spec" (no free
-                                   # lattice point: the spec's direction at the spacing); ""
-                                   # when it did not place the job
+    placed: str = ""               # a Placed: how _place_on_lattice chose the new position;
+                                   # "" when it did not place the job
     sweep_points: dict = field(default_factory=dict)
 
 
@@ -552,13 +557,13 @@ def _place_on_lattice(snap: Snapshot, jobs: list[JobSpec], spacing: float,
         if len(taken) > 1:
             taken = [np.concatenate(taken)]
         p = None
-        job.placed = "spec"
+        job.placed = Placed.SPEC
         for need_o in ((True, False) if po is not None else (False,)):
             p = lattice_target(local, pf, po if need_o else None, u, taken[0], reach=reach,
                                min_sep=0.35 * spacing, min_dist=0.5 * spacing,
                                blocked=walls, side_from=po)
             if p is not None:
-                job.placed = "lattice" if need_o else "lattice_f"
+                job.placed = Placed.LATTICE if need_o else Placed.LATTICE_F
                 break
         job.distance = spacing
         if p is not None:
