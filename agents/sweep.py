@@ -50,7 +50,14 @@ robot that sees nobody is cut off from every source, and the coordinator sends i
 
 Phase 1 goes towards the edge's other end until it crosses the edge's perpendicular at
 ``sweep_far``; phase 2 back past the vertex until it crosses the ray ``sweep_stop`` beyond
-the perpendicular there. A phase stops short after sweep_budget_rv of travel, or when a
+the perpendicular there. Room is where the wall leaves the edge's lens (within
+``sweep_depth`` of it; :meth:`SweepGeom.held`). With ``Task.sweep_lenses`` (experimental,
+``[coordinator] sweep_lenses``) it must also leave the lens of each segment from the vertex
+to another landmark, which keeps the same guarantee (a point in it is as near the vertex or
+that landmark as a point of the edge's lens is to an end); the far line must still lie in
+the edge's own lens, and the coordinator's first drive goes on while in them (at most d0):
+a wall 0.8 m out in front of the next fence side at the vertex is then swept, not taken for
+room (pillar_hall seed 0: a row of robots laid along the wall that way). A phase stops short after sweep_budget_rv of travel, or when a
 robot's touch sector blocks the way (a robot seen in its span: a wall there may be one).
 The edge's other end blocking phase 1 counts as reaching ``sweep_far`` (no third body fits
 between them) only when a robot says it touches there (``Perception.told``) and the other
@@ -66,6 +73,7 @@ import math
 from typing import Mapping
 
 from swarmcover.bus.messages import Task, sweep_reason
+from swarmcover.ground.geometry import in_lenses, lens_radii
 
 from .control import FrameTracker, blocks, wrap
 from .modes import Context, Mode, ModeState, Outcome, Phase, Tick
@@ -122,7 +130,8 @@ class SweepGeom:
     end at ``q`` (the first sweep landmark's point), the side swept ``side`` (+1 CCW of
     the edge's direction), ``far`` (fraction), ``stop`` (rad), ``depth`` (m)."""
 
-    __slots__ = ("ex", "ey", "nx", "ny", "length", "far", "stop", "depth", "points", "other")
+    __slots__ = ("ex", "ey", "nx", "ny", "length", "far", "stop", "depth", "points", "other",
+                 "lenses")
 
     def __init__(self, task: Task):
         pts = task.sweep_points
@@ -135,6 +144,9 @@ class SweepGeom:
         s = 1.0 if task.sweep_side > 0 else -1.0
         self.nx, self.ny = -s * self.ey, s * self.ex
         self.far, self.stop, self.depth = task.sweep_far, task.sweep_stop, task.sweep_depth
+        self.lenses = lens_radii((qx, qy), self.depth,
+                                 [pt for l, pt in self.points.items() if l != self.other]
+                                 if task.sweep_lenses else [])
 
     def frac(self, R) -> float:
         """R's projection on the edge, as a fraction from the vertex."""
@@ -149,6 +161,16 @@ class SweepGeom:
         """Distance from R to the edge segment (the points' unit)."""
         t = min(1.0, max(0.0, self.frac(R))) * self.length
         return math.hypot(R[0] - t * self.ex, R[1] - t * self.ey)
+
+    def held(self, R) -> bool:
+        """Whether R lies in the lens of the edge (within ``depth`` of it) or in that of a
+        segment from the vertex to another landmark (ground.geometry.lens_radii: the same
+        guarantee, within the edge's reach of the vertex or of that landmark). The lenses
+        are convex and hold the vertex, so their union is star-shaped from it: a wall
+        followed inside it, closed by the edge's perpendicular at ``far`` (inside the edge's
+        own lens) and the ray at ``stop``, encloses only what the union holds. A wall that
+        leaves every lens leaves room in front of the side."""
+        return self.depth_of(R) <= self.depth or in_lenses(R[0], R[1], self.lenses[1:])
 
 
 class Sweep(ModeState):
@@ -327,10 +349,13 @@ class Sweep(ModeState):
                 self.turned += 2.0 * p.tau
                 self.lost = 0.0
         if self.phase == 1 and f >= g.far:
+            if g.depth_of(R) > g.depth:
+                # the far line from the edge to here must lie in the edge's own lens
+                return Tick(outcome=Outcome.DONE, reason="room")
             self._phase_two()
         if self.phase == 2 and g.phi(R) >= g.stop and math.hypot(*R) > 1e-6:
             return self._end("end")
-        if g.depth_of(R) > g.depth:
+        if not g.held(R):
             return Tick(outcome=Outcome.DONE, reason="room")
         t = self.n - self.h * PI / 2.0
         d = wrap(math.atan2(math.cos(p.press) * math.sin(t) + math.sin(p.press) * math.sin(self.n),

@@ -45,6 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmcover.ground.angles import wrap
+from swarmcover.ground.geometry import in_lenses, lens_radii
 
 # mirrors of the agent's and the world's defaults (tests/test_truth.py checks them)
 PRESS = math.radians(35.0)   # AgentParams.sweep_press_deg
@@ -105,11 +106,12 @@ class Sweeper:
 
     segs: (S, 4) wall segments; others: (M, 2) the other robots' centres; r: body radius;
     heading: the robot's body heading (rad; touch sectors are fixed to the body); depth:
-    how far from the edge segment the wall may recede before it is room (m);
-    n_touch: touch sectors."""
+    how far from the edge segment the wall may recede before it is room (m), unless it
+    recedes into the lens of a segment from E to one of ``landmarks`` ((K, 2): the agent's
+    sweep landmarks but Q; the agent's SweepGeom.held); n_touch: touch sectors."""
 
     def __init__(self, segs, others, E, Q, side: int, *, r: float, heading: float,
-                 depth: float, n_touch: int = 8, rv: float = 1.0):
+                 depth: float, n_touch: int = 8, rv: float = 1.0, landmarks=()):
         self.segs = np.asarray(segs, float)
         self.others = np.asarray(others, float).reshape(-1, 2)
         self.E, self.Q = np.asarray(E, float), np.asarray(Q, float)
@@ -119,6 +121,8 @@ class Sweeper:
         self.r, self.heading, self.depth = float(r), float(heading), float(depth)
         self.w = 2.0 * math.pi / n_touch
         self.budget = BUDGET_RV * rv
+        self.lenses = lens_radii(tuple(self.Q - self.E), self.depth,
+                                 [tuple(p - self.E) for p in np.asarray(landmarks, float).reshape(-1, 2)])
 
     # ------------------------------------------------------------------ geometry
     def frac(self, R) -> float:
@@ -134,6 +138,11 @@ class Sweeper:
         """Distance (m) from R to the edge segment."""
         t = min(1.0, max(0.0, self.frac(R)))
         return float(np.linalg.norm(R - (self.E + t * self.L * self.e)))
+
+    def held(self, R) -> bool:
+        """Whether R lies in the edge's lens or a landmark's (agents.sweep.SweepGeom.held)."""
+        return self.depth_of(R) <= self.depth or in_lenses(
+            float(R[0] - self.E[0]), float(R[1] - self.E[1]), self.lenses[1:])
 
     def sectors(self, R) -> list[float]:
         """World directions of the centres of the touch sectors that feel a wall at R."""
@@ -211,10 +220,13 @@ class Sweeper:
                 f = self.frac(R)
                 hi, lo = max(hi, f), min(lo, f)
                 if phase == 1 and f >= far:
+                    if self.depth_of(R) > self.depth:
+                        # the far line from the edge to here lies in the edge's own lens
+                        return SweepResult("room", R, hi, lo, False, total)
                     break
                 if phase == 2 and self.phi(R) >= stop and np.linalg.norm(R - self.E) > 1e-6:
                     return SweepResult("swept", R, hi, -math.inf, False, total, " ".join(why))
-                if self.depth_of(R) > self.depth:
+                if not self.held(R):
                     return SweepResult("room", R, hi, lo, False, total)
                 t = _unit(n - h * math.pi / 2.0)
                 d = math.cos(PRESS) * t + math.sin(PRESS) * _unit(n)

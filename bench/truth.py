@@ -423,13 +423,15 @@ class Outcome:
     swept: tuple[float, float] | None = None
 
 
-def execute_sweep(sw: Swarm, dep, depth: float) -> Outcome:
+def execute_sweep(sw: Swarm, dep, depth: float, d0: float | None = None) -> Outcome:
     """A wall sweep (``dep.sweep_far`` > 0; bench/sweep.py): the end's drive along
     ``dep.bearing`` up to ``depth`` (m); clear: a new robot there ('clear'); a touch: the
     sweep, which ends 'swept' (the robot home, ``swept`` = (hi, lo)), or with a new robot
     where it stopped: 'opening' (it drove into an opening) or 'room' (its wall receded
     beyond the depth limit)."""
     from bench.sweep import Sweeper
+    from swarmcover.coordinator.topology.targets import star_shape
+    from swarmcover.ground.geometry import lens_reach
     i = int(dep.vertex)
     a, b = dep.edge
     j = b if a == i else a
@@ -439,15 +441,22 @@ def execute_sweep(sw: Swarm, dep, depth: float) -> Outcome:
         # the edge's ends stacked on one point (raster maps, seed 0 map 10): no edge to
         # sweep along, a touch that joins nothing (the agent's SweepGeom has no length)
         return Outcome(i, d, dep.kind, "touch", 0.0, None, dep)
-    trav, end, cdir = sw.drive(p, sw.world(i, d), depth)
+    # with TopologyParams.sweep_lenses (``d0`` given) the agent's landmarks, the robots whose
+    # place in i's frame the bearings fix, hold lenses too
+    lms = ([] if d0 is None
+           else [sw.pos[k] for k in star_shape(dict(enumerate(sw.adj)), i, j) if k != j])
+    others = np.array([q for k, q in enumerate(sw.pos) if k != i]).reshape(-1, 2)
+    side = 1 if float(dep.offset) > 0 else -1
+    sp = Sweeper(sw.segs, others, p, sw.pos[j], side, r=RADIUS, heading=sw.heading[i],
+                 depth=depth, n_touch=N_TOUCH, rv=RV, landmarks=lms)
+    # the first drive goes on while in the lenses at i, at most d0 (coordinator.tasks)
+    go = sw.world(i, d)
+    trav, end, cdir = sw.drive(p, go, depth if d0 is None
+                               else max(depth, lens_reach(go, sp.lenses, cap=d0)))
     if cdir is None and sw.robot_at(end) is not None:
         return Outcome(i, d, dep.kind, "touch", trav, None, dep)   # a bump: no sweep
     if cdir is None:
         return Outcome(i, d, dep.kind, "clear", trav, sw.add(end), dep)
-    others = np.array([q for k, q in enumerate(sw.pos) if k != i]).reshape(-1, 2)
-    side = 1 if float(dep.offset) > 0 else -1
-    sp = Sweeper(sw.segs, others, p, sw.pos[j], side, r=RADIUS, heading=sw.heading[i],
-                 depth=depth, n_touch=N_TOUCH, rv=RV)
     res = sp.run(end, cdir, float(dep.sweep_far), float(dep.sweep_stop))
     if res.kind == "swept":
         return Outcome(i, d, dep.kind, "swept", trav + res.travelled, None, dep,
@@ -457,14 +466,17 @@ def execute_sweep(sw: Swarm, dep, depth: float) -> Outcome:
                    trav + res.travelled, sw.add(res.pos, contact=c[0] if c else None), dep)
 
 
-def execute(sw: Swarm, dep, sweep_depth: float, wall_keep: float) -> Outcome:
+def execute(sw: Swarm, dep, sweep_depth: float, wall_keep: float,
+            d0: float | None = None) -> Outcome:
     """Carry out one fence deployment geometrically (see the module docstring): a sweep
-    follows its wall up to ``sweep_depth`` (m); a touch nearer than ``wall_keep`` (m)
+    follows its wall up to ``sweep_depth`` (m) from the edge (with ``d0``, m, given: the
+    experimental TopologyParams.sweep_lenses, in the lenses at its vertex, its first drive
+    up to d0 while in them); a touch nearer than ``wall_keep`` (m)
     fails, a farther one leaves the robot at the wall (TopologyParams.no_room_depth)."""
     i = int(dep.vertex)
     kind = getattr(dep, "kind", "edge")
     if float(getattr(dep, "sweep_far", 0.0) or 0.0) > 0.0:
-        return execute_sweep(sw, dep, sweep_depth)
+        return execute_sweep(sw, dep, sweep_depth, d0)
     p = sw.pos[i]
     wdir = sw.world(i, float(dep.bearing))
     if kind == "probe":
@@ -577,7 +589,7 @@ def run_map(case: MapCase, *, per_cycle: int = 8, cap: int | None = None,
             v = min(fence.deployments)
             deps = [fence.deployments[v][0]]
         for dep in deps:
-            o = execute(sw, dep, P.sweep_depth, wall_keep)
+            o = execute(sw, dep, P.sweep_depth, wall_keep, P.d0 if P.sweep_lenses else None)
             fb.record(o)
             placed[o.result] += 1
             if o.new_robot is not None:

@@ -641,7 +641,8 @@ class Task(Message):
       of it, -1 clockwise. The robot finds where it is from the bearings of
       ``sweep_landmarks`` (robot ids, a subset of ``landmarks``, the other end first),
       standing at ``sweep_points`` (x, y per landmark, m, reference frame, the vertex at
-      the origin).
+      the origin). ``sweep_lenses``: room is where the wall leaves the lens of every segment
+      from the vertex to a sweep landmark too, not only the edge's (agents.sweep).
     sight (test_drive only; default empty = none): robot ids, a subset of ``landmarks``
       that no other push moves, sent when nobody refills the vertex the robot leaves. The
       test leg keeps in sight one of those in view at its start: with none of them in
@@ -673,6 +674,7 @@ class Task(Message):
     sweep_depth: float = f_float(0.0, 1e4, optional=True)
     sweep_landmarks: list = f_ints(0, optional=True)
     sweep_points: list = f_floats(-1e4, 1e4, optional=True)
+    sweep_lenses: bool = f_bool(optional=True)
     sight: list = f_ints(0, optional=True)
 
     def _post_check(self):

@@ -100,6 +100,12 @@ class CoordinatorConfig:
                                    # wall at least 2 x radius + 0.06 m wide is found (0.18 m
                                    # with the default body and [agent] sweep_*), whatever its
                                    # width in rv. false: door_min_rv's probe lines
+    sweep_lenses: bool = False     # experimental: a sweep's wall may also recede into the lens
+                                   # of a segment from its vertex to another robot round it
+                                   # before it is room, and its first drive goes on while in
+                                   # them (up to d0). Fewer wall robots; off until a false
+                                   # certificate it met (bench/truth.py seed 0 map 429) is
+                                   # understood (coordinator.topology.params)
     free_probes: bool = True       # frontier robots off every push probe their sides in the
                                    # same cycle without a path, and come back home whatever
                                    # they found (a clear one is no evidence; a push takes that
@@ -174,7 +180,8 @@ class CoordinatorConfig:
         return TopologyParams(rv=self.rv, eps=self.eps_rv * self.rv,
                               beta=math.radians(self.beta_deg), n_touch=self.n_touch,
                               w_obstacle=self.w_obstacle, d_td=self.d_td_rv * self.rv,
-                              redundancy_period=self.redundancy_period, sweep=self.sweep)
+                              redundancy_period=self.redundancy_period, sweep=self.sweep,
+                              sweep_lenses=self.sweep_lenses)
 
     @classmethod
     def from_section(cls, section: dict | None, rv: float, where: str = "config") -> "CoordinatorConfig":

@@ -54,6 +54,7 @@ class Step:
     n_landmarks: int = -1         # landmarks of the goto/hold task it was started with
     touch_offset: float = 0.0     # failed test drive: touch sector centre - direction (rad)
     timeout_s: float = 0.0        # the task's own timeout (s), when longer than the config's
+    distance: float = 0.0         # the task's distance (m): how far a test drive goes
 
 
 @dataclass

@@ -206,9 +206,9 @@ class Pushes:
                 # the robot is the new vertex where its drive ended: no deploy, no refine
                 self._record(spec, touched=False, placed=spec.new_vertex)
                 if placed != "wall" and spec.via_frac <= 0:
-                    # a clear drive from f: the new vertex is that far from f
+                    # a clear drive from f: the new vertex is as far from f as it drove
                     self.placement.known.append(
-                        (path[-1], spec.new_vertex, td_length(spec, self.params)))
+                        (path[-1], spec.new_vertex, td.distance or td_length(spec, self.params)))
                 dep.state, dep.reason = S.DONE, placed
                 self._step_done(job, dep)
                 ref = job.step(N.REFINE)
@@ -423,6 +423,7 @@ class Pushes:
         s.state = S.RUNNING
         s.started_t = now
         s.timeout_s = task.timeout_s
+        s.distance = task.distance
 
     def _check_timeout(self, s: Step, now: float) -> None:
         r = self.roster.get(s.robot)

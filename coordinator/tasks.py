@@ -12,6 +12,7 @@ import math
 
 from swarmcover.bus.messages import Task
 from swarmcover.ground.angles import wrap
+from swarmcover.ground.geometry import lens_radii, lens_reach
 
 from .config import CoordinatorConfig
 from .planner import JobSpec, Snapshot
@@ -193,6 +194,15 @@ class TaskBuilder:
         task.sweep_stop = spec.sweep_stop
         task.sweep_depth = spec.distance if spec.distance is not None else self.params.d_td
         task.timeout_s = 2.0 * self.cfg.task_timeout_s
+        if not self.params.sweep_lenses:
+            return
+        # the first drive goes on while it is in the lenses at f (the sweep's room test,
+        # agents.sweep.SweepGeom.held: a touch there is swept, not taken for room), at most d0
+        task.sweep_lenses = True
+        pts = task.sweep_points
+        lenses = lens_radii((pts[0], pts[1]), task.sweep_depth,
+                            [(pts[k], pts[k + 1]) for k in range(2, len(pts), 2)])
+        task.distance = max(task.distance, lens_reach(task.direction, lenses, cap=self.cfg.d0))
 
     def deploy(self, spec: JobSpec, moving: set[int]) -> Task:
         """Frontier robot to the new position (spec 4.4): homing on the static landmarks of

@@ -20,6 +20,7 @@ from swarmcover.agents.params import AgentParams
 from swarmcover.agents.sweep import SweepGeom, locate
 from swarmcover.bus.messages import Sense, Task, parse_sweep_reason, sweep_stoppers
 from swarmcover.ground.angles import wrap
+from swarmcover.ground.geometry import lens_radii, lens_reach
 from swarmcover.coordinator.topology.targets import star_shape
 from swarmcover.world.maps import WorldMap
 from swarmcover.world.physics import Physics
@@ -116,17 +117,28 @@ def _scene(door: float | None, ang: float = 0.0, others=(), *, thick: float = 0.
     return wm, {k: tuple(np.array(p) @ M.T) for k, p in pts.items()}, rot
 
 
-def _task(pts, rot, far=0.9, stop_deg=10.0, direction_deg=-70.0, depth=0.75):
+def _task(pts, rot, far=0.9, stop_deg=10.0, direction_deg=-70.0, depth=0.75, side=-1,
+          drop=(), distance=0.75, lenses=False):
     """The sweep task the coordinator would send robot 0: landmark places from bearings
-    (star_shape) at d0 per edge length, its vertex's bearings to home back on."""
+    (star_shape) at d0 per edge length, but for the robots ``drop``, its vertex's bearings
+    to home back on; the first drive ``distance`` long (None: as far as it stays in the
+    lenses at robot 0, at most d0, as coordinator.tasks sends it with ``lenses``, the
+    experimental Task.sweep_lenses)."""
     nb = {i: {j: math.atan2(q[1] - p[1], q[0] - p[0]) for j, q in pts.items()
               if j != i and math.dist(p, q) <= 1.0} for i, p in pts.items()}
     shape = star_shape(nb, 0, 1)
-    lms = [1] + sorted(k for k in shape if k != 1)
+    lms = [1] + sorted(k for k in shape if k != 1 and k not in drop)
     home = sorted(nb[0])
+    direction = math.radians(direction_deg) + rot
+    if distance is None:
+        pts_ = [c * D0 for k in lms for c in shape[k]]
+        lz = lens_radii((pts_[0], pts_[1]), depth,
+                        [(pts_[k], pts_[k + 1]) for k in range(2, len(pts_), 2)] if lenses else [])
+        distance = max(depth, lens_reach(direction, lz, cap=D0))
     return Task(task_id=1, robot=0, kind="test_drive", vertex=0, landmarks=home,
-                bearings=[nb[0][k] for k in home], direction=math.radians(direction_deg) + rot,
-                distance=0.75, keep_after=0.0, timeout_s=80.0, sweep_side=-1,
+                bearings=[nb[0][k] for k in home], direction=direction,
+                distance=distance, keep_after=0.0, timeout_s=80.0, sweep_side=side,
+                sweep_lenses=lenses,
                 sweep_edge=nb[0][1], sweep_far=far, sweep_stop=math.radians(stop_deg),
                 sweep_depth=depth, sweep_landmarks=lms,
                 sweep_points=[c * D0 for k in lms for c in shape[k]]).validate()
@@ -431,3 +443,43 @@ def test_the_sweep_slides_at_its_own_speed_whatever_the_test_drive_s():
     v_sweep = np.median(step[on == "sweep"]) / 0.05
     assert v_open > 0.45                   # the drive out at v_max = 0.5 m/s
     assert 0.1 < v_sweep < 0.26            # the slide at half of it (pressing in: a bit less)
+
+
+# the wall row's chain (pillar_hall seed 0, stop 54): robot 0 in the row 0.58 m from the
+# wall, robot 1 against the wall 0.9 m from it, robot 5 the row's next robot
+Y0 = 0.58
+_CHAIN = {0: (0.0, Y0), 1: (-0.735, 0.06), 5: (0.87, 0.58), 9: (-0.6, 0.75),
+          2: (0.45, 1.13), 3: (-0.45, 1.13), 4: (1.35, 1.13), 6: (1.8, 1.6), 8: (0.0, 1.91)}
+
+
+@pytest.mark.parametrize("ang", [0.0, 22.5])
+def test_a_wall_in_the_next_side_s_lens_is_swept_not_taken_for_room(ang):
+    """With Task.sweep_lenses (experimental, off by default). The side 0-1 faces the wall obliquely; the first drive, 15 deg off its perpendicular
+    towards robot 5, meets the wall 0.81 m out, beyond the edge's lens (0.75 m) but within
+    the lens of the segment to robot 5 (0.76 m about it; robots 0 and 5 cover it). The
+    drive goes on while in the lenses (up to d0), touches, and the sweep follows the wall to
+    the far line and back past robot 0 to the ray 15 deg beyond the perpendicular, 0.82 m
+    from robot 0: swept, the whole of its half joined. With robot 1 its only landmark
+    the drive ends clear at 0.75 m, and the robot stays there."""
+    wm, pts, rot = _scene(None, ang, _CHAIN)
+    e = math.degrees(math.atan2(pts[1][1] - pts[0][1], pts[1][0] - pts[0][0]) - rot)
+
+    def task(drop=()):
+        # robots 1, 2 (a fix on the way) and 5 (robot 9, 0.62 m away, would hold a disk of
+        # 0.82 m round robot 0; robot 2's holds 0.80 m, short of the ray)
+        return _task(pts, rot, far=0.5, stop_deg=15.0, side=1, distance=None, lenses=True,
+                     drop=(3, 4, 8, 9, *drop), direction_deg=e + 90.0 + 15.0)
+    assert task().distance == pytest.approx(D0) and task((2, 5)).distance == pytest.approx(0.75)
+    # without Task.sweep_lenses (the default) the edge's lens alone: the same wall is room
+    assert len(SweepGeom(_task(pts, rot, side=1)).lenses) == 1
+    beh, trace, modes = _run(wm, pts, task())
+    assert beh.task_state == "failed", beh.reason
+    hi, lo = parse_sweep_reason(beh.reason)
+    assert lo == -math.inf and hi >= 0.5
+    on_wall = _local(trace, rot)[modes == "sweep"]
+    assert on_wall[:, 1].max() < R + 0.015 + 0.005          # it followed the wall
+    assert math.hypot(on_wall[:, 0].max(), Y0 - R) > 0.81      # past the lenses of 0-1, 0-2
+    assert math.dist(trace[-1], pts[0]) < 0.03
+    beh, trace, modes = _run(wm, pts, task((2, 5)))
+    assert (beh.task_state, beh.reason) == ("done", "")
+    assert math.dist(trace[-1], pts[0]) == pytest.approx(0.75, abs=0.03)

@@ -92,7 +92,9 @@ def test_circular_mean_of_nothing_and_of_opposites():
 GEOMETRY_HOME = {"rings_to_segments": "ground/geometry.py", "rings_to_walls": None,
                  "flat_to_points": "ground/geometry.py", "flat_to_polygon": None,
                  "point_in_polygon": "ground/geometry.py", "edge_distance": "ground/geometry.py",
-                 "signed_area": "ground/geometry.py", "polygon_signed_area": None}
+                 "signed_area": "ground/geometry.py", "polygon_signed_area": None,
+                 "lens_radii": "ground/geometry.py", "in_lenses": "ground/geometry.py",
+                 "lens_reach": "ground/geometry.py"}
 
 
 def test_geometry_helpers_are_defined_once_in_the_ground_floor():
@@ -197,3 +199,61 @@ def test_bearing_spread_is_the_determinant_of_the_bearing_normals_gram_matrix(an
         assert bearing_spread([a, a + PI, a, wrap(a - PI)]) == pytest.approx(0.0, abs=1e-12)
     assert bearing_spread([0.0, PI / 6]) == pytest.approx(0.25)
     assert bearing_spread([0.0, 2 * PI / 3, -2 * PI / 3]) == pytest.approx(2.25)
+
+
+# the lenses at a vertex: the wall sweep's room test (agents.sweep.SweepGeom.held)
+_pt = st.tuples(st.floats(-1.6, 1.6), st.floats(-1.6, 1.6))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(0.3, 1.0), st.floats(-math.pi, math.pi), st.floats(0.3, 0.8),
+       st.lists(_pt, max_size=6), _pt, st.floats(0.0, 1.0))
+def test_a_point_in_the_lenses_is_within_the_edge_s_reach_of_a_robot_and_so_is_its_way_home(
+        L, a, depth, others, x, t):
+    """Whatever the landmarks: a point in the lenses at the vertex lies within
+    sqrt(depth^2 + |q|^2 / 4) (the edge's own guarantee) of the vertex, q or a landmark, and
+    so does every point between it and the vertex (the union is star-shaped from it: a wall
+    followed inside it encloses nothing outside it)."""
+    from swarmcover.ground.geometry import in_lenses, lens_radii
+    q = (L * math.cos(a), L * math.sin(a))
+    lenses = lens_radii(q, depth, others)
+    reach = math.sqrt(depth ** 2 + 0.25 * L ** 2)
+    robots = [(0.0, 0.0), q, *others]
+    if in_lenses(x[0], x[1], lenses):
+        for px, py in ((x[0], x[1]), (t * x[0], t * x[1])):
+            assert in_lenses(px, py, lenses)
+            assert min(math.dist((px, py), r) for r in robots) <= reach + 1e-9
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(0.3, 1.0), st.floats(0.3, 0.8), st.lists(_pt, max_size=6),
+       st.floats(-math.pi, math.pi), st.floats(0.2, 3.0))
+def test_lens_reach_is_where_the_ray_leaves_the_lenses(L, depth, others, theta, cap):
+    """lens_reach: the ray from the vertex is in the lenses up to it (sampled) and out of
+    them just beyond it, unless the cap stopped it; never less than the depth (the edge's
+    lens holds the disk of that radius round the vertex)."""
+    from swarmcover.ground.geometry import in_lenses, lens_radii, lens_reach
+    lenses = lens_radii((L, 0.0), depth, others)
+    s = lens_reach(theta, lenses, cap=cap)
+    u = (math.cos(theta), math.sin(theta))
+    assert s >= min(depth, cap) - 1e-6 and s <= cap
+    for k in range(21):
+        r = s * k / 20 - 1e-6
+        assert in_lenses(r * u[0], r * u[1], lenses)
+    if s < cap - 1e-5:
+        r = s + 1e-5
+        assert not in_lenses(r * u[0], r * u[1], lenses)
+
+
+def test_a_landmark_s_lens_holds_what_the_edge_s_does_not():
+    """The vertex at the origin, its edge 0.9 m along x, a neighbour 0.87 m along y:
+    (-0.5, 0.6) is out of the edge's lens (0.75 m) and in the neighbour's (sqrt(0.765 -
+    0.87^2 / 4) = 0.76 m about the segment); (-0.5, -0.6) is in neither."""
+    from swarmcover.ground.geometry import in_lenses, lens_radii, lens_reach
+    lenses = lens_radii((0.9, 0.0), 0.75, [(0.0, 0.87)])
+    assert lenses[1][2] == pytest.approx(math.sqrt(0.75 ** 2 + 0.45 ** 2 - 0.87 ** 2 / 4))
+    assert in_lenses(-0.5, 0.6, lenses) and not in_lenses(-0.5, -0.6, lenses)
+    assert lens_reach(-math.pi / 2, lenses) == pytest.approx(lenses[1][2], abs=1e-5)
+    assert lens_reach(-math.pi / 2, lenses[:1]) == pytest.approx(0.75, abs=1e-5)
+    assert lens_reach(math.pi / 2, lenses) == pytest.approx(0.87 + lenses[1][2], abs=1e-5)
+    assert lens_reach(math.pi / 2, lenses, cap=0.9) == 0.9

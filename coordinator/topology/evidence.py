@@ -61,7 +61,12 @@ loses (one touch sector per agents' sweep_lost_m without a touch). Going round a
 by 135 deg or more since its last turn into a wall is an OPENING at least a body wide (a
 narrower gap stops the body on its far side: a turn into a wall); the robot stays there as
 a new robot (like a clear probe: its own deployments explore what lies beyond), and so
-does one whose wall recedes beyond TopologyParams.sweep_depth. Driving into an opening, a
+does one whose wall recedes beyond TopologyParams.sweep_depth. (With the experimental
+TopologyParams.sweep_lenses, out of every lens at its end: the edge's and those of the
+segments from the end to the robots round it, each of which puts a point in it as near one
+of two robots as the edge's lens does (ground.geometry.lens_radii; their union is
+star-shaped from the end, so a wall followed in it encloses only what it holds; the far line
+lies in the edge's own lens); the first drive then goes on while in them, at most d0.) Driving into an opening, a
 wall that blocks the body within its own length is a turn into a wall, not an opening,
 unless the robot went round to the back of the wall it followed (turned back 135 deg since
 its normal last held for a body length): a bump's face or a raster wall's step is then
