@@ -59,8 +59,9 @@ def _write_pgm(pm, stem: Path) -> None:
     write_ros_map(stem, free, CELL, np.round(lo, 4))
 
 
-def write_config(seed: int, index: int, ros: bool, folder: Path):
-    """Map ``index`` of campaign ``seed`` as a run config in ``folder``; returns (path, case)."""
+def write_config(seed: int, index: int, ros: bool, folder: Path, coordinator=()):
+    """Map ``index`` of campaign ``seed`` as a run config in ``folder``, with the
+    ``[coordinator]`` lines ``coordinator`` (``KEY = VALUE`` strings); returns (path, case)."""
     case = make_map(seed, index, CELL if ros else 0.0)
     name = f"unseen_s{seed}_m{index}" + ("_ros" if ros else "")
     lines = [f'# bench/unseen.py: map {index} of campaign {seed} ({case.kind}'
@@ -79,6 +80,8 @@ def write_config(seed: int, index: int, ros: bool, folder: Path):
               "[robots]", "radius = 0.06", 'kind = "holonomic"', "",
               "[sensing]", f"noise_deg = {case.noise_deg}", "", "[world]", "dt = 0.05",
               'mode = "lockstep"', f"seed = {index}", ""]
+    if coordinator:
+        lines += ["[coordinator]", *coordinator, ""]
     path = folder / f"{name}.toml"
     path.write_text("\n".join(lines))
     return path, case
@@ -119,8 +122,8 @@ def audit_totals(rows: list[dict]) -> dict:
 
 def run_map(job) -> dict:
     """One map: write its config, run it in-process, judge it by ground truth."""
-    seed, index, ros, folder, timeout = job
-    path, case = write_config(seed, index, ros, Path(folder))
+    seed, index, ros, folder, timeout, *more = job
+    path, case = write_config(seed, index, ros, Path(folder), *more)
     row = dict(seed=seed, index=index, kind=case.kind, ros=ros, facing_wall=case.facing_wall,
                door_rv=case.door_w, noise_deg=case.noise_deg, config=str(path))
     return judge(str(path), row, timeout)
@@ -224,11 +227,19 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=1, help="worker processes")
     ap.add_argument("--timeout", type=float, default=900.0, help="wall seconds per map")
     ap.add_argument("--out", help="folder for the configs and results.json (default: temporary)")
+    ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                    help="a [coordinator] field for every map, as TOML, e.g. sweep_lenses=true")
     a = ap.parse_args(argv)
     if a.ros < 0:
         ap.error("--ros must be >= 0")
+    sets = []
+    for kv in a.set:
+        k, eq, v = kv.partition("=")
+        if not eq or not k.strip():
+            ap.error(f"--set {kv!r}: expected FIELD=VALUE")
+        sets.append(f"{k.strip()} = {v.strip()}")
     return campaign(ap, a, "unseen", lambda folder: [
-        (a.seed, i, bool(a.ros) and i % a.ros == a.ros - 1, folder, a.timeout)
+        (a.seed, i, bool(a.ros) and i % a.ros == a.ros - 1, folder, a.timeout, tuple(sets))
         for i in range(a.start, a.start + a.maps)], run_map, _head)
 
 if __name__ == "__main__":

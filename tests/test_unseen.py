@@ -51,7 +51,21 @@ def test_one_map_runs_the_swarm_to_a_certificate_ground_truth_agrees_with(tmp_pa
         for why, a in row["fence_audit"].items()}
 
 
-@pytest.mark.parametrize("argv", [["--maps", "0"], ["--jobs", "0"], ["--ros", "-1"]])
+def test_set_writes_coordinator_fields_the_config_check_reads(tmp_path):
+    """--set FIELD=VALUE lands in every map's [coordinator] section, and the run config's
+    own validation reads it (an experiment on the product, not on a copy of its rules)."""
+    from swarmcover.coordinator.config import CoordinatorConfig
+
+    def coord(path):
+        return CoordinatorConfig.from_section(load_config(str(path)).section("coordinator"), 1.0)
+    path, _ = unseen.write_config(0, 3, False, tmp_path, ("sweep_lenses = true",))
+    assert coord(path).sweep_lenses is True and coord(path).topology().sweep_lenses is True
+    path, _ = unseen.write_config(0, 3, False, tmp_path)
+    assert coord(path).sweep_lenses is False
+
+
+@pytest.mark.parametrize("argv", [["--maps", "0"], ["--jobs", "0"], ["--ros", "-1"],
+                                  ["--set", "sweep_lenses"]])
 def test_bad_flags_are_usage_errors_naming_the_flag(argv, capsys):
     with pytest.raises(SystemExit) as e:
         unseen.main(argv)
