@@ -57,8 +57,8 @@ to another landmark, which keeps the same guarantee (a point in it is as near th
 that landmark as a point of the edge's lens is to an end); the far line must still lie in
 the edge's own lens, and the coordinator's first drive goes on while in them (at most d0):
 a wall 0.8 m out in front of the next fence side at the vertex is then swept, not taken for
-room (pillar_hall seed 0: a row of robots laid along the wall that way). A phase stops short after sweep_budget_rv of travel, or when a
-robot's touch sector blocks the way (a robot seen in its span: a wall there may be one).
+room (pillar_hall seed 0: a row of robots laid along the wall that way). A phase stops
+short after sweep_budget_rv of travel, or when a robot's touch sector blocks the way (a robot seen in its span: a wall there may be one).
 The edge's other end blocking phase 1 counts as reaching ``sweep_far`` (no third body fits
 between them) only when a robot says it touches there (``Perception.told``) and the other
 end is the only robot seen that way, on two Sense ticks in a row (the robot holds still
@@ -144,9 +144,10 @@ class SweepGeom:
         s = 1.0 if task.sweep_side > 0 else -1.0
         self.nx, self.ny = -s * self.ey, s * self.ex
         self.far, self.stop, self.depth = task.sweep_far, task.sweep_stop, task.sweep_depth
+        # the landmarks' lenses (the edge's own is depth_of's), none without Task.sweep_lenses
         self.lenses = lens_radii((qx, qy), self.depth,
                                  [pt for l, pt in self.points.items() if l != self.other]
-                                 if task.sweep_lenses else [])
+                                 if task.sweep_lenses else [])[1:]
 
     def frac(self, R) -> float:
         """R's projection on the edge, as a fraction from the vertex."""
@@ -170,7 +171,7 @@ class SweepGeom:
         followed inside it, closed by the edge's perpendicular at ``far`` (inside the edge's
         own lens) and the ray at ``stop``, encloses only what the union holds. A wall that
         leaves every lens leaves room in front of the side."""
-        return self.depth_of(R) <= self.depth or in_lenses(R[0], R[1], self.lenses[1:])
+        return self.depth_of(R) <= self.depth or in_lenses(R[0], R[1], self.lenses)
 
 
 class Sweep(ModeState):

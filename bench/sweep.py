@@ -121,8 +121,9 @@ class Sweeper:
         self.r, self.heading, self.depth = float(r), float(heading), float(depth)
         self.w = 2.0 * math.pi / n_touch
         self.budget = BUDGET_RV * rv
-        self.lenses = lens_radii(tuple(self.Q - self.E), self.depth,
-                                 [tuple(p - self.E) for p in np.asarray(landmarks, float).reshape(-1, 2)])
+        # the landmarks' lenses, E at the origin (the edge's own is depth_of's)
+        self.lenses = lens_radii(tuple(self.Q - self.E), self.depth, [
+            tuple(p - self.E) for p in np.asarray(landmarks, float).reshape(-1, 2)])[1:]
 
     # ------------------------------------------------------------------ geometry
     def frac(self, R) -> float:
@@ -142,7 +143,7 @@ class Sweeper:
     def held(self, R) -> bool:
         """Whether R lies in the edge's lens or a landmark's (agents.sweep.SweepGeom.held)."""
         return self.depth_of(R) <= self.depth or in_lenses(
-            float(R[0] - self.E[0]), float(R[1] - self.E[1]), self.lenses[1:])
+            float(R[0] - self.E[0]), float(R[1] - self.E[1]), self.lenses)
 
     def sectors(self, R) -> list[float]:
         """World directions of the centres of the touch sectors that feel a wall at R."""

@@ -431,7 +431,7 @@ def execute_sweep(sw: Swarm, dep, depth: float, d0: float | None = None) -> Outc
     beyond the depth limit)."""
     from bench.sweep import Sweeper
     from swarmcover.coordinator.topology.targets import star_shape
-    from swarmcover.ground.geometry import lens_reach
+    from swarmcover.ground.geometry import lens_radii, lens_reach
     i = int(dep.vertex)
     a, b = dep.edge
     j = b if a == i else a
@@ -441,22 +441,23 @@ def execute_sweep(sw: Swarm, dep, depth: float, d0: float | None = None) -> Outc
         # the edge's ends stacked on one point (raster maps, seed 0 map 10): no edge to
         # sweep along, a touch that joins nothing (the agent's SweepGeom has no length)
         return Outcome(i, d, dep.kind, "touch", 0.0, None, dep)
-    # with TopologyParams.sweep_lenses (``d0`` given) the agent's landmarks, the robots whose
-    # place in i's frame the bearings fix, hold lenses too
-    lms = ([] if d0 is None
-           else [sw.pos[k] for k in star_shape(dict(enumerate(sw.adj)), i, j) if k != j])
-    others = np.array([q for k, q in enumerate(sw.pos) if k != i]).reshape(-1, 2)
-    side = 1 if float(dep.offset) > 0 else -1
-    sp = Sweeper(sw.segs, others, p, sw.pos[j], side, r=RADIUS, heading=sw.heading[i],
-                 depth=depth, n_touch=N_TOUCH, rv=RV, landmarks=lms)
-    # the first drive goes on while in the lenses at i, at most d0 (coordinator.tasks)
-    go = sw.world(i, d)
-    trav, end, cdir = sw.drive(p, go, depth if d0 is None
-                               else max(depth, lens_reach(go, sp.lenses, cap=d0)))
+    go, reach, lms = sw.world(i, d), depth, []
+    if d0 is not None:
+        # TopologyParams.sweep_lenses: the agent's landmarks (the robots whose place in i's
+        # frame the bearings fix) hold lenses too, and the first drive goes on while in
+        # them, at most d0 (coordinator.tasks)
+        lms = [sw.pos[k] for k in star_shape(dict(enumerate(sw.adj)), i, j) if k != j]
+        lenses = lens_radii(tuple(sw.pos[j] - p), depth, [tuple(q - p) for q in lms])
+        reach = max(depth, lens_reach(go, lenses, cap=d0))
+    trav, end, cdir = sw.drive(p, go, reach)
     if cdir is None and sw.robot_at(end) is not None:
         return Outcome(i, d, dep.kind, "touch", trav, None, dep)   # a bump: no sweep
     if cdir is None:
         return Outcome(i, d, dep.kind, "clear", trav, sw.add(end), dep)
+    others = np.array([q for k, q in enumerate(sw.pos) if k != i]).reshape(-1, 2)
+    side = 1 if float(dep.offset) > 0 else -1
+    sp = Sweeper(sw.segs, others, p, sw.pos[j], side, r=RADIUS, heading=sw.heading[i],
+                 depth=depth, n_touch=N_TOUCH, rv=RV, landmarks=lms)
     res = sp.run(end, cdir, float(dep.sweep_far), float(dep.sweep_stop))
     if res.kind == "swept":
         return Outcome(i, d, dep.kind, "swept", trav + res.travelled, None, dep,
