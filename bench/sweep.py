@@ -98,6 +98,7 @@ class SweepResult:
     opening: bool = False
     travelled: float = 0.0
     why: str = ""
+    entered: np.ndarray | None = None   # an opening: where its last leg into it began
 
 
 class Sweeper:
@@ -246,18 +247,20 @@ class Sweeper:
                     # held last and not past it (a bump's top, not through a door)
                     short = (not n0_held and wound < OPEN_TURNS * self.w - 1e-9
                              and float((R - ref_at) @ _unit(ref)) <= self.r)
+                    entered = R.copy()
                     R, went, wall = self._into(R, n0, 2.0 * self.r if short else math.inf)
                     total += went
                     if short and wall is None and went >= 2.0 * self.r - 1e-9:
                         # clear for a body length past a face shorter than that (a bump's),
                         # not round to the back of the wall held last: along its normal
                         travelled += went
+                        entered = R.copy()
                         R, more, wall = self._into(R, ref)
                         total += more
                         went = more
                     if (wall is None or went >= 2.0 * self.r
                             or wound >= OPEN_TURNS * self.w - 1e-9):
-                        return SweepResult("room", R, hi, lo, True, total)
+                        return SweepResult("room", R, hi, lo, True, total, entered=entered)
                     # a wall across the way within a body length, not behind the wall it
                     # followed: no opening; a turn into this wall, and on along it
                     travelled += went
