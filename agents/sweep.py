@@ -51,7 +51,7 @@ robot that sees nobody is cut off from every source, and the coordinator sends i
 Phase 1 goes towards the edge's other end until it crosses the edge's perpendicular at
 ``sweep_far``; phase 2 back past the vertex until it crosses the ray ``sweep_stop`` beyond
 the perpendicular there. Room is where the wall leaves the edge's lens (within
-``sweep_depth`` of it; :meth:`SweepGeom.held`). With ``Task.sweep_lenses`` (experimental,
+``sweep_depth`` of it; :meth:`SweepGeom.held`). With ``Task.sweep_lenses`` (the default
 ``[coordinator] sweep_lenses``) it must also leave the lens of each segment from the vertex
 to another landmark, which keeps the same guarantee (a point in it is as near the vertex or
 that landmark as a point of the edge's lens is to an end); the far line must still lie in

@@ -228,7 +228,7 @@ def main(argv=None) -> int:
     ap.add_argument("--timeout", type=float, default=900.0, help="wall seconds per map")
     ap.add_argument("--out", help="folder for the configs and results.json (default: temporary)")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                    help="a [coordinator] field for every map, as TOML, e.g. sweep_lenses=true")
+                    help="a [coordinator] field for every map, as TOML, e.g. sweep_lenses=false")
     a = ap.parse_args(argv)
     if a.ros < 0:
         ap.error("--ros must be >= 0")

@@ -100,12 +100,12 @@ class CoordinatorConfig:
                                    # wall at least 2 x radius + 0.06 m wide is found (0.18 m
                                    # with the default body and [agent] sweep_*), whatever its
                                    # width in rv. false: door_min_rv's probe lines
-    sweep_lenses: bool = False     # experimental: a sweep's wall may also recede into the lens
-                                   # of a segment from its vertex to another robot round it
+    sweep_lenses: bool = True      # a sweep's wall may also recede into the lens of a
+                                   # segment from its vertex to another robot round it
                                    # before it is room, and its first drive goes on while in
-                                   # them (up to d0). Fewer wall robots; off until a false
-                                   # certificate it met (bench/truth.py seed 0 map 429) is
-                                   # understood (coordinator.topology.params)
+                                   # them (up to d0): fewer wall robots
+                                   # (coordinator.topology.params). false: the edge's lens
+                                   # alone (the rule until 2026-12-03)
     free_probes: bool = True       # frontier robots off every push probe their sides in the
                                    # same cycle without a path, and come back home whatever
                                    # they found (a clear one is no evidence; a push takes that

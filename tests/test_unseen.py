@@ -58,10 +58,10 @@ def test_set_writes_coordinator_fields_the_config_check_reads(tmp_path):
 
     def coord(path):
         return CoordinatorConfig.from_section(load_config(str(path)).section("coordinator"), 1.0)
-    path, _ = unseen.write_config(0, 3, False, tmp_path, ("sweep_lenses = true",))
-    assert coord(path).sweep_lenses is True and coord(path).topology().sweep_lenses is True
+    path, _ = unseen.write_config(0, 3, False, tmp_path, ("sweep_lenses = false",))
+    assert coord(path).sweep_lenses is False and coord(path).topology().sweep_lenses is False
     path, _ = unseen.write_config(0, 3, False, tmp_path)
-    assert coord(path).sweep_lenses is False
+    assert coord(path).sweep_lenses is True
 
 
 @pytest.mark.parametrize("argv", [["--maps", "0"], ["--jobs", "0"], ["--ros", "-1"],
