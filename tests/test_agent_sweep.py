@@ -454,8 +454,8 @@ _CHAIN = {0: (0.0, Y0), 1: (-0.735, 0.06), 5: (0.87, 0.58), 9: (-0.6, 0.75),
 
 @pytest.mark.parametrize("ang", [0.0, 22.5])
 def test_a_wall_in_the_next_side_s_lens_is_swept_not_taken_for_room(ang):
-    """With Task.sweep_lenses (the coordinator's default since 2026-12-03). The side 0-1 faces the wall
-    obliquely; the first drive, 15 deg off its perpendicular
+    """With Task.sweep_lenses (the coordinator's default since 2026-12-03). The side 0-1
+    faces the wall obliquely; the first drive, 15 deg off its perpendicular
     towards robot 5, meets the wall 0.81 m out, beyond the edge's lens (0.75 m) but within
     the lens of the segment to robot 5 (0.76 m about it; robots 0 and 5 cover it). The
     drive goes on while in the lenses (up to d0), touches, and the sweep follows the wall to
@@ -471,7 +471,7 @@ def test_a_wall_in_the_next_side_s_lens_is_swept_not_taken_for_room(ang):
         return _task(pts, rot, far=0.5, stop_deg=15.0, side=1, distance=None, lenses=True,
                      drop=(3, 4, 8, 9, *drop), direction_deg=e + 90.0 + 15.0)
     assert task().distance == pytest.approx(D0) and task((2, 5)).distance == pytest.approx(0.75)
-    # without Task.sweep_lenses (a message's default) the edge's lens alone: the same wall is room
+    # without Task.sweep_lenses (a message's default) the edge's lens alone: the wall is room
     assert SweepGeom(_task(pts, rot, side=1)).lenses == []
     beh, trace, modes = _run(wm, pts, task())
     assert beh.task_state == "failed", beh.reason

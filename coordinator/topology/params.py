@@ -65,8 +65,9 @@ class TopologyParams:
       (agents.sweep.SweepGeom.held, ground.geometry.lens_radii). On by default since
       2026-12-03: seed 0 in process it took 755 -> 703 robots over the eight configs; the
       false certificate bench/truth.py met with it (seed 0 map 429) came from the bench's
-      booking of rooms, not the rule: booked as the deployer books them (``--hold-rooms``,
-      now the bench's default), 500 of 500 maps certified, 0 false (README, issue 19).
+      booking of rooms, not the rule: booked as the deployer books them (run_map's
+      ``hold_rooms``, now the bench's default), 500 of 500 maps certified, 0 false, on
+      seeds 0 and 1 each (README, issue 19).
     """
 
     rv: float = 1.0
