@@ -106,6 +106,11 @@ class CoordinatorConfig:
                                    # them (up to d0): fewer wall robots
                                    # (coordinator.topology.params). false: the edge's lens
                                    # alone (the rule until 2026-12-03)
+    gap_probes: bool = True        # a side whose sweeps left a gap and found no room
+                                   # drives the probe lines in the gap and closes on their
+                                   # touches (evidence, 'gap_probes'), not as the inference
+                                   # 'sweep_gap' (coordinator.topology.params). false: the
+                                   # rule until 2026-12-03
     free_probes: bool = True       # frontier robots off every push probe their sides in the
                                    # same cycle without a path, and come back home whatever
                                    # they found (a clear one is no evidence; a push takes that
@@ -181,7 +186,7 @@ class CoordinatorConfig:
                               beta=math.radians(self.beta_deg), n_touch=self.n_touch,
                               w_obstacle=self.w_obstacle, d_td=self.d_td_rv * self.rv,
                               redundancy_period=self.redundancy_period, sweep=self.sweep,
-                              sweep_lenses=self.sweep_lenses)
+                              sweep_lenses=self.sweep_lenses, gap_probes=self.gap_probes)
 
     @classmethod
     def from_section(cls, section: dict | None, rv: float, where: str = "config") -> "CoordinatorConfig":

@@ -98,8 +98,9 @@ def test_a_candidate_side_is_swept_from_both_ends_and_closes_once_they_join():
 
 def test_a_sweep_stopped_short_is_tried_again_farther_then_closes_only_as_inferred():
     """A sweep that stopped short (a robot in its way) leaves a gap; its end sweeps again
-    with its far line past the gap, and once its tries are used up the side closes only as
-    the inference 'sweep_gap', reported with the certificate."""
+    with its far line past the gap, and once its tries are used up, the gap holding no
+    probe line, the side closes only as the inference 'sweep_gap', reported with the
+    certificate."""
     cx, ev = _candidate()
     a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
     ev.record(b, touched=True, swept=(0.55, -INF))        # v covers [0.45, +inf)
@@ -115,8 +116,10 @@ def test_a_sweep_stopped_short_is_tried_again_farther_then_closes_only_as_inferr
     ev.record(b3, touched=True, swept=(0.6, -INF))        # [0.4, +inf): (0.3, 0.4) is left
     f = detect_fence(cx, **ev.fence_kwargs())
     e, side = _side(f, cx)
+    # no probe line (0.25, 0.5, 0.75) falls in the gap: narrower than door_min_rv's lines
+    # are apart, it holds no door they guarantee, and nothing is probed
     assert not _sweeps(f) and e in f.obstacle.tolist() and side.reason == "sweep_gap"
-    assert (e, "sweep_gap") in [(int(k), w) for k, w in f.inferred]
+    assert (e, "sweep_gap") in [(int(k), w) for k, w in f.inferred] and not _probes_of(f)
 
 
 def _gap_left(by=()):
@@ -271,14 +274,92 @@ def test_a_lost_room_gives_back_every_try_whose_robot_stayed(case):
     assert [d.vertex for d in _sweeps(f)] == [b.vertex]
 
 
+def _probes_of(f, edge=(0, 1)):
+    return [d for lst in f.deployments.values() for d in lst
+            if d.kind == "probe" and d.edge == edge and d.sweep_far == 0]
+
+
+def _drive_gap_probes(cx, ev, params=None, clear=()):
+    """Drive every probe the fence offers on side 0-1 until none is left: each touches
+    head-on (no tilt asked for) unless its fraction from u is in ``clear`` (it found room,
+    its robot stays). Returns (the fence, the fractions from u driven)."""
+    driven = []
+    for _ in range(20):
+        f = detect_fence(cx, params, **ev.fence_kwargs())
+        probes = _probes_of(f)
+        if not probes:
+            return f, sorted(driven)
+        d = probes[0]
+        g = round(d.via_frac if d.vertex == 0 else 1.0 - d.via_frac, 3)
+        driven.append(g)
+        ev.record(d, touched=g not in clear)
+    raise AssertionError("the gap's probes never ended")
+
+
 def test_a_touch_that_could_not_sweep_counts_a_try_but_joins_nothing():
+    """Sweeps sent with no landmark to sweep on touch and join nothing: with both ends'
+    tries used up the whole side is a gap, and its probe lines are driven, every interior
+    one; all touched, the side closes on evidence ('gap_probes'), not as an inference."""
     cx, ev = _candidate()
     a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
     for _ in range(TopologyParams().sweep_tries):
         ev.record(a, touched=True)           # "touch": the task had no landmarks to sweep on
         ev.record(b, touched=True)
     f = detect_fence(cx, **ev.fence_kwargs())
-    assert _side(f, cx)[1].reason == "sweep_gap" and not _sweeps(f)
+    assert _side(f, cx)[1].reason == "probing" and not _sweeps(f)
+    f, driven = _drive_gap_probes(cx, ev)
+    e, side = _side(f, cx)
+    assert driven == [0.25, 0.5, 0.75]
+    assert side.reason == "gap_probes" and e in f.obstacle.tolist() and not f.inferred
+
+
+def _wide_gap():
+    """Both ends' sweeps over, u's joined (-inf, 0.2], v's [0.55, +inf): the gap (0.2,
+    0.55) holds the probe lines at 0.25 and 0.5."""
+    cx, ev = _candidate()
+    a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
+    ev.record(b, touched=True, swept=(0.45, -INF))        # v covers [0.55, +inf)
+    ev.record(a, touched=True, swept=(0.2, -INF))
+    for _ in range(TopologyParams().sweep_tries - 1):
+        for d in _sweeps(detect_fence(cx, **ev.fence_kwargs())):
+            ev.record(d, touched=True, swept=(0.2, -INF) if d.vertex == 0 else (0.45, -INF))
+    assert not _sweeps(detect_fence(cx, **ev.fence_kwargs()))
+    return cx, ev
+
+
+def test_a_gap_the_sweeps_left_is_probed_on_the_lines_in_it():
+    """'sweep_gap' closed a side on no evidence of its own: the sweeps stopped short (a
+    robot in the way, lost landmarks), and a door in the gap would be certified over (a
+    rule since reverted certified bench/truth.py seed 0 map 429 at 48% that way). The probe
+    lines that fall in the gap are driven, and only those; all touched, the side closes on
+    evidence ('gap_probes', not reported as inferred)."""
+    cx, ev = _wide_gap()
+    f = detect_fence(cx, **ev.fence_kwargs())
+    e, side = _side(f, cx)
+    assert side.kind == "frontier" and e not in f.obstacle.tolist()
+    f, driven = _drive_gap_probes(cx, ev)
+    e, side = _side(f, cx)
+    assert driven == [0.25, 0.5]
+    assert side.reason == "gap_probes" and e in f.obstacle.tolist() and not f.inferred
+
+
+def test_a_gap_probe_that_finds_room_closes_only_as_inferred():
+    """A probe line in the gap that went clear found room (its robot stays): the side,
+    still one-sided, closes only as the inference 'probe_clear', as under the probe rule."""
+    cx, ev = _wide_gap()
+    f, driven = _drive_gap_probes(cx, ev, clear=(0.5,))
+    e, side = _side(f, cx)
+    assert driven == [0.25, 0.5]
+    assert side.reason == "probe_clear" and (e, "probe_clear") in [(int(k), w) for k, w in f.inferred]
+
+
+def test_without_gap_probes_the_gap_is_closed_as_inferred():
+    """``TopologyParams.gap_probes = False``: the rule until 2026-12-03, 'sweep_gap' at once."""
+    cx, ev = _wide_gap()
+    f = detect_fence(cx, TopologyParams(gap_probes=False), **ev.fence_kwargs())
+    e, side = _side(f, cx)
+    assert side.reason == "sweep_gap" and (e, "sweep_gap") in [(int(k), w) for k, w in f.inferred]
+    assert not _probes_of(f)
 
 
 def test_dangling_edges_keep_the_probe_lines():

@@ -143,9 +143,10 @@ def corner_candidates(marks: Marks, ends: Marks, open_sides: Sides) -> tuple[Mar
 
 
 def _side_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: ProbeEvidence,
-                 e: int, sg: int) -> tuple[list[Deployment], int, int]:
+                 e: int, sg: int, fracs=None) -> tuple[list[Deployment], int, int]:
     """(probe deployments still to drive, n_open, n_clear) of side sg of edge e: n_open
-    interior probes not done, n_clear found room."""
+    interior probes not done, n_clear found room. ``fracs``: the fractions to probe
+    (default ``ev.fracs``; :func:`_gap_fracs` for a swept side's gaps)."""
     ids = cx.ids
     d0_rv, dtd_rv = P.d0 / P.rv, P.d_td / P.rv
     u, v = int(cx.edges[e, 0]), int(cx.edges[e, 1])
@@ -164,7 +165,7 @@ def _side_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Prob
             t = wrap(c - perp)
             if needs_tilt(t, P.tilt_min) and abs(t) < math.pi / 2.0 - P.tau:
                 end_tilts.append(t)
-    for g in ev.fracs:
+    for g in (ev.fracs if fracs is None else fracs):
         if g <= 1e-9 or g >= 1.0 - 1e-9:
             # the ends: their own failed drives / contacts made the side a candidate. The
             # interior fractions alone pass every opening >= door_min_rv within the span
@@ -272,6 +273,19 @@ def _side_sweeps(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Prob
     return out, (0 if out else len(gaps)), n_clear
 
 
+def _gap_fracs(ev: ProbeEvidence, side) -> tuple[float, ...]:
+    """The interior probe fractions (``ev.fracs`` strictly between 0 and 1) that lie inside
+    a gap the sweeps of ``side`` (u, v, sigma) left (evidence.sweep_gaps). A swept interval
+    is wall a robot's body followed, so an opening lies in the gaps; one at least
+    door_min_rv wide there holds a stretch s = door_min_rv - 2 r long where a body clears
+    both jambs, and the probe lines are at most s apart: one of these fractions crosses it.
+    Empty when no fraction lies in a gap (every gap narrower than s, or beyond the edge's
+    span, in front of its ends)."""
+    gaps = sweep_gaps(ev.sweeps.get(tuple(side), ()) if ev.sweeps else ())
+    return tuple(g for g in ev.fracs if 1e-9 < g < 1.0 - 1e-9
+                 and any(a < g < b for a, b in gaps))
+
+
 def _side_key(cx: Complex, e: int, sg: int) -> tuple[int, int, int]:
     """(u, v, sigma) of side sg of edge e, node ids (evidence's SideKey)."""
     return int(cx.ids[int(cx.edges[e, 0])]), int(cx.ids[int(cx.edges[e, 1])]), int(sg)
@@ -294,18 +308,28 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
         if (e, sg) in marks:
             continue
         sweep = P.sweep and open_sides is not None and len(open_sides.get(e, ())) == 1
+        gap_fracs = None
         if sweep:
             inner, n_open, n_clear = _side_sweeps(cx, L, P, room, ev, e, sg)
-            # its sweeps are over short of closing it on evidence, and a robot cut off from
-            # the swarm stopped one: it stands in free space the complex does not hold,
-            # perhaps in the gap, and no inference closes that. The probe rule drives into
-            # the side at every fraction instead: a probe that finds room there stays, seen
-            # by that robot, which then links again (closed, the room behind a 0.30 rv door
-            # was certified at 54% coverage: bench/unseen.py seed 0 map 8)
-            sweep = (bool(inner) or (n_open == 0 and n_clear == 0)
-                     or _side_key(cx, e, sg) not in ev.foreign)
+            over = not inner and n_open > 0     # sweeps over, a gap left
+            key = _side_key(cx, e, sg)
+            if over and key in ev.foreign:
+                # a robot cut off from the swarm stopped one: it stands in free space the
+                # complex does not hold, perhaps in the gap, and no inference closes that.
+                # The probe rule drives into the side at every fraction instead: a probe
+                # that finds room there stays, seen by that robot, which then links again
+                # (closed, the room behind a 0.30 rv door was certified at 54% coverage:
+                # bench/unseen.py seed 0 map 8)
+                sweep = False
+            elif over and n_clear == 0 and P.gap_probes:
+                # no end found room, and the gaps are no evidence of a wall: the probe
+                # lines that fall in them are driven (a touch at each, tilted as the probe
+                # rule asks, closes the side on evidence: 'gap_probes'); a gap no line
+                # falls in is narrower than door_min_rv, or in front of an end
+                gap_fracs = _gap_fracs(ev, key)
+                sweep = not gap_fracs
         if not sweep:
-            inner, n_open, n_clear = _side_probes(cx, L, P, room, ev, e, sg)
+            inner, n_open, n_clear = _side_probes(cx, L, P, room, ev, e, sg, gap_fracs)
         if inner:
             probing[(e, sg)] = sorted(inner, key=lambda d: d.via_frac)
         elif not sweep and ev.found_at(_side_key(cx, e, sg)):
@@ -317,10 +341,13 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
             # uncovered through 'probes')
             probing[(e, sg)] = []
         elif n_open == 0 and n_clear == 0:
-            marks[(e, sg)] = "probes"         # every probe touched: closed on evidence
+            # every probe touched: closed on evidence (the probes of a swept side's gaps:
+            # the sweeps followed the wall elsewhere)
+            marks[(e, sg)] = "gap_probes" if gap_fracs else "probes"
         elif sweep and n_clear == 0:
             # sweeps stopped short (a robot in the way, lost landmarks) from both ends as
-            # often as they may, and a gap is left: closed, as an INFERENCE
+            # often as they may, and a gap is left that no probe line falls in (or
+            # TopologyParams.gap_probes is off): closed, as an INFERENCE
             marks[(e, sg)] = "sweep_gap"
         elif sweep and P.clear_infers:
             marks[(e, sg)] = "probe_clear"    # inferred: an end's sweep found room

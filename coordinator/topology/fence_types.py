@@ -14,7 +14,13 @@ from typing import Mapping
 
 import numpy as np
 
-__all__ = ["Deployment", "FenceSide", "FenceEdge", "Fence"]
+__all__ = ["Deployment", "FenceSide", "FenceEdge", "Fence", "EVIDENCE"]
+
+# the reasons an obstacle side closes on evidence (every other reason is an inference,
+# reported with the certificate): 'probes' (every probe touched, or a side's wall sweeps
+# joined from ray to ray) and 'gap_probes' (the probe lines in the gaps a side's sweeps
+# left all touched: coordinator.topology.fence_probes)
+EVIDENCE = frozenset({"probes", "gap_probes"})
 
 
 @dataclass(frozen=True)
@@ -90,8 +96,8 @@ class FenceSide:
 
     @property
     def inferred(self) -> bool:
-        """An obstacle side closed by inference, not by evidence (probes)."""
-        return self.kind == "obstacle" and self.reason != "probes"
+        """An obstacle side closed by inference, not by evidence (``EVIDENCE``)."""
+        return self.kind == "obstacle" and self.reason not in EVIDENCE
 
 
 @dataclass(frozen=True)

@@ -68,6 +68,12 @@ class TopologyParams:
       booking of rooms, not the rule: booked as the deployer books them (run_map's
       ``hold_rooms``, now the bench's default), 500 of 500 maps certified, 0 false, on
       seeds 0 and 1 each (README, issue 19).
+    gap_probes: a side whose sweeps are over with a gap left and no end's room found drives
+      the probe lines that fall in the gaps (coordinator.topology.fence_probes) and closes
+      on their touches ('gap_probes', evidence) or as the probe rule's inferences; only a
+      gap no line falls in (narrower than door_min_rv, or in front of an end) still closes
+      as the inference 'sweep_gap'. False: every such side closes as 'sweep_gap' (the rule
+      until 2026-12-03).
     """
 
     rv: float = 1.0
@@ -87,6 +93,7 @@ class TopologyParams:
     sweep_margin: float = math.radians(10.0)
     sweep_tries: int = 2
     sweep_lenses: bool = True
+    gap_probes: bool = True
 
     def __post_init__(self) -> None:
         if self.eps is None:
