@@ -99,6 +99,8 @@ class SweepResult:
     travelled: float = 0.0
     why: str = ""
     entered: np.ndarray | None = None   # an opening: where its last leg into it began
+    by: tuple = ()      # indices into ``others`` of the robots a stop short met (the
+                        # agent's ``swept HI LO by IDS``, bus.messages.sweep_stoppers)
 
 
 class Sweeper:
@@ -115,6 +117,8 @@ class Sweeper:
                  depth: float, n_touch: int = 8, rv: float = 1.0, landmarks=()):
         self.segs = np.asarray(segs, float)
         self.others = np.asarray(others, float).reshape(-1, 2)
+        self._near: tuple = ()          # robot_ahead's last 'robot': indices into others
+        self._by: set[int] = set()      # the robots stops short met (SweepResult.by)
         self.E, self.Q = np.asarray(E, float), np.asarray(Q, float)
         self.L = float(np.linalg.norm(self.Q - self.E))
         self.e = (self.Q - self.E) / max(self.L, 1e-12)
@@ -176,6 +180,7 @@ class Sweeper:
         k = np.nonzero(near)[0]
         if len(k) == 1 and np.linalg.norm(self.others[k[0]] - self.Q) < 1e-9:
             return "Q"
+        self._near = tuple(int(x) for x in k)
         return "robot"
 
     # ------------------------------------------------------------------ the sweep
@@ -227,7 +232,8 @@ class Sweeper:
                         return SweepResult("room", R, hi, lo, False, total)
                     break
                 if phase == 2 and self.phi(R) >= stop and np.linalg.norm(R - self.E) > 1e-6:
-                    return SweepResult("swept", R, hi, -math.inf, False, total, " ".join(why))
+                    return SweepResult("swept", R, hi, -math.inf, False, total, " ".join(why),
+                                       by=tuple(sorted(self._by)))
                 if not self.held(R):
                     return SweepResult("room", R, hi, lo, False, total)
                 t = _unit(n - h * math.pi / 2.0)
@@ -235,12 +241,15 @@ class Sweeper:
                 block = "budget" if travelled >= self.budget else self.robot_ahead(R, d)
                 if block:
                     why.append(f"{phase}:{block}")
+                    if block == "robot":
+                        self._by.update(self._near)
                     if phase == 1:
                         if block == "Q":
                             # the other end's body: it rests where the wall goes on
                             hi = max(hi, far)
                         break
-                    return SweepResult("swept", R, hi, lo, False, total, " ".join(why))
+                    return SweepResult("swept", R, hi, lo, False, total, " ".join(why),
+                                       by=tuple(sorted(self._by)))
                 if turned >= OPEN_TURNS:
                     # an opening: into it along the normal of the wall it went round
                     # round a face shorter than a body length, not to the back of the wall

@@ -443,6 +443,7 @@ class Outcome:
     deployment: object = None
     contact_offset: float = 0.0
     swept: tuple[float, float] | None = None
+    by: tuple = ()      # a sweep's stoppers: robot indices (bench.sweep.SweepResult.by)
 
 
 def execute_sweep(sw: Swarm, dep, depth: float, d0: float | None = None,
@@ -485,8 +486,9 @@ def execute_sweep(sw: Swarm, dep, depth: float, d0: float | None = None,
                  depth=depth, n_touch=N_TOUCH, rv=RV, landmarks=lms)
     res = sp.run(end, cdir, float(dep.sweep_far), float(dep.sweep_stop))
     if res.kind == "swept":
+        idx = [k for k in range(len(sw.pos)) if k != i]     # others' rows -> robot indices
         return Outcome(i, d, dep.kind, "swept", trav + res.travelled, None, dep,
-                       swept=(res.hi, res.lo))
+                       swept=(res.hi, res.lo), by=tuple(idx[k] for k in res.by))
     pos = res.pos
     if keep_sight and res.opening and res.entered is not None:
         pos = sw.back_in_sight(pos, res.entered, [j, *(k for k in star if k != j)],
@@ -568,7 +570,7 @@ class Feedback:
             if o.result == "unreached":
                 self._ev.record_unreached(o.deployment)
             elif o.result == "swept":
-                self._ev.record(o.deployment, touched=True, swept=o.swept)
+                self._ev.record(o.deployment, touched=True, swept=o.swept, by=o.by)
             else:
                 # a robot that stays (clear, wall, room, opening) holds the room it found
                 # only while it stands beyond the side: booked as the deployer books it
@@ -600,11 +602,15 @@ class Feedback:
         rooms whose robot does not stand beyond their side, as coordinator.jobs'
         evidence_kwargs has them (no cut-off robot here: truth robots never move)."""
         if self._ev is not None:
+            # a sweep a robot stopped: every truth robot is of the swarm (coordinator.jobs'
+            # sweep_blocked; none is cut off and sent away here)
+            blocked = frozenset(k for k, by in self._ev.sweep_stoppers().items() if by)
             if reps is None or not self.hold_rooms:
-                return self._ev.fence_kwargs()
+                return dict(self._ev.fence_kwargs(), sweep_blocked=blocked)
             from swarmcover.coordinator.jobs import beyond_side
             snap = _snapshot(reps)
-            return self._ev.fence_kwargs(snap.occupant, beyond_side(snap))
+            return dict(self._ev.fence_kwargs(snap.occupant, beyond_side(snap)),
+                        sweep_blocked=blocked)
         return {"test_drive_failures": {k: list(v) for k, v in self.failures.items()}}
 
 

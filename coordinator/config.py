@@ -106,9 +106,10 @@ class CoordinatorConfig:
                                    # them (up to d0): fewer wall robots
                                    # (coordinator.topology.params). false: the edge's lens
                                    # alone (the rule until 2026-12-03)
-    gap_probes: bool = True        # a side whose sweeps left a gap and found no room
-                                   # drives the probe lines in the gap and closes on their
-                                   # touches (evidence, 'gap_probes'), not as the inference
+    gap_probes: bool = True        # a side whose sweeps left a gap and found no room,
+                                   # none stopped by a robot of the swarm, drives the probe
+                                   # lines in the gap and closes on their touches
+                                   # (evidence, 'gap_probes'), not as the inference
                                    # 'sweep_gap' (coordinator.topology.params). false: the
                                    # rule until 2026-12-03
     free_probes: bool = True       # frontier robots off every push probe their sides in the

@@ -207,7 +207,8 @@ def evidence_kwargs(evidence: Evidence, snap: Snapshot, cut_off=frozenset()) -> 
     (less the failed directions, passed as ``test_drive_failures``); a drive that found
     room counts only while its robot's vertex stands beyond the side (:func:`beyond_side`).
     ``sweep_foreign``: the sides a sweep of which a robot cut off from the swarm stopped,
-    one sent away as such (``cut_off``: robot ids) or one of ``snap`` no source reaches."""
+    one sent away as such (``cut_off``: robot ids) or one of ``snap`` no source reaches;
+    ``sweep_blocked``: those a robot of ``snap`` a source reaches stopped."""
     linked = source_component(snap)
     kw = evidence.fence_kwargs(snap.occupant,
                                beyond_side(snap, linked if snap.sources else None))
@@ -216,8 +217,12 @@ def evidence_kwargs(evidence: Evidence, snap: Snapshot, cut_off=frozenset()) -> 
     # does not hold, and no inference may close the gap it left (fence_probes: 'sweep_gap').
     # A robot sent away as redundant stands where the certified complex held it
     outside = set(cut_off) | {r for v, r in snap.occupant.items() if v not in linked}
-    kw["sweep_foreign"] = frozenset(k for k, by in evidence.sweep_stoppers(snap.occupant).items()
-                                    if by & outside)
+    stoppers = evidence.sweep_stoppers(snap.occupant)
+    kw["sweep_foreign"] = frozenset(k for k, by in stoppers.items() if by & outside)
+    # a sweep stopped by a robot of the swarm, linked to a source now: the space in front
+    # of the side is where it stands (fence_probes: 'sweep_blocked', not probed)
+    members = {r for v, r in snap.occupant.items() if v in linked} - set(cut_off)
+    kw["sweep_blocked"] = frozenset(k for k, by in stoppers.items() if by & members)
     return kw
 
 

@@ -148,9 +148,9 @@ def _tri_snap(cut=False):
     return Snapshot(occupant={0: 0, 1: 1, 2: 2, 3: 42}, nbrs=nbrs, sources=[0])
 
 
-@pytest.mark.parametrize("case, infers", [("member", True), ("cut_off", False),
-                                          ("sent_away_cut_off", False),
-                                          ("sent_away_redundant", True)])
+@pytest.mark.parametrize("case, infers", [("member", "sweep_blocked"), ("cut_off", None),
+                                          ("sent_away_cut_off", None),
+                                          ("sent_away_redundant", "sweep_gap")])
 def test_no_inference_closes_a_gap_a_cut_off_robot_stopped_the_sweeps_at(case, infers):
     """bench/unseen.py seed 0 maps 8 and 18: a robot cut off from the swarm stood in or
     beyond a 0.30 rv door, stopped the sweeps from both jambs, and the side closed as
@@ -159,7 +159,9 @@ def test_no_inference_closes_a_gap_a_cut_off_robot_stopped_the_sweeps_at(case, i
     the side is probed by the probe rule instead (a probe finding room in the door stays,
     and the robot beyond links again, coordinator.placement.Placement.rejoin). A robot of
     the swarm, or one sent away as redundant (it stands where the certified complex held
-    it), is what it was: 'sweep_gap', an inference reported with the certificate."""
+    it), is what it was: an inference reported with the certificate ('sweep_blocked': a
+    robot of the swarm stands in front of the side; 'sweep_gap': the robot gone, and no
+    probe line falls in the gap (0.3, 0.4) left)."""
     from swarmcover.coordinator.jobs import evidence_kwargs
     cx, ev = _gap_left(by=(42,))
     snap = _tri_snap(cut=(case == "cut_off"))
@@ -172,7 +174,8 @@ def test_no_inference_closes_a_gap_a_cut_off_robot_stopped_the_sweeps_at(case, i
     e, side = _side(f, cx)
     assert not _sweeps(f)
     if infers:
-        assert side.reason == "sweep_gap" and e in f.obstacle.tolist()
+        assert side.reason == infers and e in f.obstacle.tolist()
+        assert (e, infers) in [(int(k), w) for k, w in f.inferred]
     else:
         # the probe rule instead: perpendicular probes at every interior fraction
         assert side.kind == "frontier" and e not in f.obstacle.tolist()
@@ -351,6 +354,48 @@ def test_a_gap_probe_that_finds_room_closes_only_as_inferred():
     e, side = _side(f, cx)
     assert driven == [0.25, 0.5]
     assert side.reason == "probe_clear" and (e, "probe_clear") in [(int(k), w) for k, w in f.inferred]
+
+
+def _wide_gap_by(by):
+    """_wide_gap's evidence with u's sweeps stopped by the robots ``by``."""
+    cx, ev = _candidate()
+    a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
+    ev.record(b, touched=True, swept=(0.45, -INF))
+    ev.record(a, touched=True, swept=(0.2, -INF), by=by)
+    for _ in range(TopologyParams().sweep_tries - 1):
+        for d in _sweeps(detect_fence(cx, **ev.fence_kwargs())):
+            ev.record(d, touched=True, swept=(0.2, -INF) if d.vertex == 0 else (0.45, -INF),
+                      by=by if d.vertex == 0 else ())
+    return cx, ev
+
+
+@pytest.mark.parametrize("case, probed", [("member", False), ("cut_off", True),
+                                          ("gone", True), ("nobody", True)])
+def test_a_gap_a_robot_of_the_swarm_stopped_the_sweeps_at_is_not_probed(case, probed):
+    """Probing every gap placed robots where the sweeps had met one (seed 0: small 25 -> 33
+    robots, pillar_hall 122 -> 141): a sweep that stops on a robot of the swarm stopped in
+    the space that robot stands in. Such a side closes as the inference 'sweep_blocked'
+    (coordinator.jobs.evidence_kwargs: the stopper is a robot a source reaches now). A
+    stopper cut off from the swarm, or gone, or none, leaves the gap to its probe lines."""
+    from swarmcover.coordinator.jobs import evidence_kwargs
+    cx, ev = _wide_gap_by(() if case == "nobody" else (42,))
+    snap = _tri_snap(cut=(case == "cut_off"))
+    if case == "gone":
+        snap = Snapshot(occupant={0: 0, 1: 1, 2: 2}, nbrs={i: _nbrs(TRI, i) for i in range(3)},
+                        sources=[0])
+    kw = evidence_kwargs(ev, snap)
+    assert ((0, 1, -1) in kw["sweep_blocked"] or (0, 1, 1) in kw["sweep_blocked"]) == (not probed)
+    f = detect_fence(cx, test_drive_failures=ev.failed_directions(), **kw)
+    e, side = _side(f, cx)
+    if probed:
+        assert side.kind == "frontier" and _probes_of(f)
+        # a cut-off stopper: the probe rule at every fraction; else the lines in the gap
+        assert {round(d.via_frac if d.vertex == 0 else 1 - d.via_frac, 3)
+                for d in _probes_of(f)} == ({0.25, 0.5, 0.75} if case == "cut_off"
+                                            else {0.25, 0.5})
+    else:
+        assert side.reason == "sweep_blocked" and not _probes_of(f)
+        assert (e, "sweep_blocked") in [(int(k), w) for k, w in f.inferred]
 
 
 def test_without_gap_probes_the_gap_is_closed_as_inferred():

@@ -108,6 +108,7 @@ def detect_fence(
     sweeps=None,
     sweep_tries=None,
     sweep_foreign=(),
+    sweep_blocked=(),
 ) -> Fence:
     """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
 
@@ -115,7 +116,8 @@ def detect_fence(
     closes"; with ``TopologyParams.sweep``, the default, a candidate side of an edge with a
     triangle closes on WALL SWEEPS from both ends instead of the probes below: once the
     intervals ``sweeps`` joined cover it, as coordinator.topology.evidence says, each end
-    offering a sweep until its tries are used up, then the inference 'sweep_gap' or, an end
+    offering a sweep until its tries are used up, then the probe lines in the gaps left
+    ('gap_probes' on evidence; see ``sweep_blocked``), the inference 'sweep_gap' or, an end
     having found room, 'probe_clear'). The ends' rules only make a side a CANDIDATE:
       * test-drive rule: both ends have no room on it -- each end's deployment into it lies
         within 30 deg of a failed drive of that robot, or within 90 deg of the wall contact
@@ -191,6 +193,11 @@ def detect_fence(
     sweep_tries: (u, v, sigma, 0.0 or 1.0: the end u or v) -> sweeps driven from that end.
     sweep_foreign: sides (u, v, sigma) a sweep of which a robot outside the complex's
       sources' part stopped: their gaps are never closed as the inference 'sweep_gap'.
+    sweep_blocked: sides (u, v, sigma) a sweep of which a robot of the swarm (linked to a
+      source) stopped. With ``TopologyParams.gap_probes`` a side whose sweeps are over with
+      a gap left and no room found is probed on the probe lines in its gaps (closed on
+      evidence, 'gap_probes', once they all touched) unless it is blocked: then it closes
+      as the inference 'sweep_blocked'; a gap no probe line falls in as 'sweep_gap'.
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
       e.g. edges reclassified after a failed test drive in an earlier cycle.
     default_bearing: first deployment direction (rad, body frame) of a robot with no
@@ -210,7 +217,7 @@ def detect_fence(
     marks = corner_wait_marks(corner_wait, marks, room)
     ev = probe_evidence(probe_failures, probe_fracs, probe_unreachable, probe_clear,
                         probe_offsets, tilt_failures, sweeps, sweep_tries, sweep_foreign,
-                        probe_found)
+                        probe_found, sweep_blocked)
     if P.corner_probes:
         marks, ends = corner_candidates(marks, ends, open_sides)
     probing, marks = plan_probes(cx, L, P, room, ev, ends, marks, open_sides)

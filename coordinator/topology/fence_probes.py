@@ -78,7 +78,8 @@ class ProbeEvidence:
     joined (fractions from u, rays -inf / +inf). sweep_tries: (u, v, sigma, 0 or 1) ->
     sweeps driven from that end. foreign: sides (u, v, sigma) one of whose sweeps a robot
     outside the sources' part of the complex stopped. found: key -> probes touched there
-    since a drive went clear at it (room found; no robot holds it now).
+    since a drive went clear at it (room found; no robot holds it now). blocked: sides
+    (u, v, sigma) one of whose sweeps a robot of the swarm (linked to a source) stopped.
     """
 
     fracs: tuple
@@ -91,6 +92,7 @@ class ProbeEvidence:
     sweep_tries: dict = None
     foreign: frozenset = frozenset()
     found: dict = None
+    blocked: frozenset = frozenset()
 
     def gave_up(self, key, end: int) -> bool:
         return (key, end) in self.unreached
@@ -102,7 +104,8 @@ class ProbeEvidence:
 
 def probe_evidence(probe_failures=(), probe_fracs=None, probe_unreachable=(), probe_clear=(),
                    probe_offsets=None, tilt_failures=(), sweeps=None,
-                   sweep_tries=None, sweep_foreign=(), probe_found=None) -> ProbeEvidence:
+                   sweep_tries=None, sweep_foreign=(), probe_found=None,
+                   sweep_blocked=()) -> ProbeEvidence:
     """detect_fence's probe keywords (same names and meaning) as a :class:`ProbeEvidence`;
     the fractions default to ``evidence.probe_fractions()``."""
     fracs = tuple(probe_fracs) if probe_fracs is not None else probe_fractions()
@@ -124,8 +127,9 @@ def probe_evidence(probe_failures=(), probe_fracs=None, probe_unreachable=(), pr
     found = {_key(k): int(n) for k, n in (probe_found or {}).items()
              if (int(k[0]), int(k[1]), int(k[2])) in foreign}
     pfail -= found.keys()
+    blocked = frozenset((int(k[0]), int(k[1]), int(k[2])) for k in sweep_blocked)
     return ProbeEvidence(fracs, frozenset(pfail), poff, tfail, frozenset(pclear),
-                         frozenset(punreach), swept, tries, foreign, found)
+                         frozenset(punreach), swept, tries, foreign, found, blocked)
 
 
 def corner_candidates(marks: Marks, ends: Marks, open_sides: Sides) -> tuple[Marks, Marks]:
@@ -296,8 +300,8 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
                 ) -> tuple[dict[tuple[int, int], list[Deployment]], Marks]:
     """(probing, marks) for the candidate sides ``ends`` not already marked, in (e,
     sigma) order: a side with probes left is probing (its deployments by via_frac); one
-    with none left is marked closed ('probes', 'probe_clear', 'probe_unreachable',
-    'sweep_gap') or, with ``TopologyParams.clear_infers`` off and some probe clear,
+    with none left is marked closed ('probes', 'gap_probes', 'probe_clear',
+    'probe_unreachable', 'sweep_blocked', 'sweep_gap') or, with ``TopologyParams.clear_infers`` off and some probe clear,
     probing with no deployment (the run ends uncertified). With ``TopologyParams.sweep``
     a side of an edge with a triangle (one open side in ``open_sides``) is swept
     (:func:`_side_sweeps`); a dangling edge's sides are probed, and so is a side whose
@@ -321,11 +325,12 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
                 # (closed, the room behind a 0.30 rv door was certified at 54% coverage:
                 # bench/unseen.py seed 0 map 8)
                 sweep = False
-            elif over and n_clear == 0 and P.gap_probes:
-                # no end found room, and the gaps are no evidence of a wall: the probe
-                # lines that fall in them are driven (a touch at each, tilted as the probe
-                # rule asks, closes the side on evidence: 'gap_probes'); a gap no line
-                # falls in is narrower than door_min_rv, or in front of an end
+            elif over and n_clear == 0 and P.gap_probes and key not in ev.blocked:
+                # no end found room, no robot of the swarm stood in the way, and the gaps
+                # are no evidence of a wall: the probe lines that fall in them are driven
+                # (a touch at each, tilted as the probe rule asks, closes the side on
+                # evidence: 'gap_probes'); a gap no line falls in is narrower than
+                # door_min_rv, or in front of an end
                 gap_fracs = _gap_fracs(ev, key)
                 sweep = not gap_fracs
         if not sweep:
@@ -344,10 +349,17 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
             # every probe touched: closed on evidence (the probes of a swept side's gaps:
             # the sweeps followed the wall elsewhere)
             marks[(e, sg)] = "gap_probes" if gap_fracs else "probes"
+        elif sweep and n_clear == 0 and P.gap_probes and _side_key(cx, e, sg) in ev.blocked:
+            # sweeps stopped short from both ends as often as they may, and a robot of the
+            # swarm (linked to a source) stood in the way of one: closed, as an INFERENCE
+            # that the space it stands in, in front of the side, is the swarm's own. Probing
+            # these gaps placed robots there: seed 0, small 25 -> 33 robots, pillar_hall
+            # 122 -> 141, cave 128 -> 138 (README, "A gap the sweeps left is probed")
+            marks[(e, sg)] = "sweep_blocked"
         elif sweep and n_clear == 0:
-            # sweeps stopped short (a robot in the way, lost landmarks) from both ends as
-            # often as they may, and a gap is left that no probe line falls in (or
-            # TopologyParams.gap_probes is off): closed, as an INFERENCE
+            # sweeps stopped short (lost landmarks, the budget, a robot in the way) from
+            # both ends as often as they may, and a gap is left that no probe line falls in
+            # (or TopologyParams.gap_probes is off): closed, as an INFERENCE
             marks[(e, sg)] = "sweep_gap"
         elif sweep and P.clear_infers:
             marks[(e, sg)] = "probe_clear"    # inferred: an end's sweep found room

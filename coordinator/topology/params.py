@@ -70,10 +70,11 @@ class TopologyParams:
       seeds 0 and 1 each (README, issue 19).
     gap_probes: a side whose sweeps are over with a gap left and no end's room found drives
       the probe lines that fall in the gaps (coordinator.topology.fence_probes) and closes
-      on their touches ('gap_probes', evidence) or as the probe rule's inferences; only a
-      gap no line falls in (narrower than door_min_rv, or in front of an end) still closes
-      as the inference 'sweep_gap'. False: every such side closes as 'sweep_gap' (the rule
-      until 2026-12-03).
+      on their touches ('gap_probes', evidence) or as the probe rule's inferences, unless a
+      robot of the swarm stopped one of its sweeps (the inference 'sweep_blocked': the
+      space in front of the side is where that robot stands); a gap no line falls in
+      (narrower than door_min_rv, or in front of an end) still closes as the inference
+      'sweep_gap'. False: every such side closes as 'sweep_gap' (the rule until 2026-12-03).
     """
 
     rv: float = 1.0
