@@ -295,7 +295,9 @@ def main(argv=None) -> int:
         print(agreement_table(pairs), flush=True)
     from swarmcover.run import strict_json
     print(strict_json({"bench": "coverage", "overrides": overrides, "dropout": args.dropout,
-                       "runs": [{k: s.get(k) for k in keys} for s in results],
+                       "runs": [dict({k: s.get(k) for k in keys},
+                                     fence_audit=(s.get("fence_audit") or {}).get("by_why"))
+                                for s in results],
                        "both": pairs}))
     return 0
 
