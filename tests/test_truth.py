@@ -252,3 +252,17 @@ def test_oblique_doors_at_corners_are_found(seed, index):
     assert row["end"] in ("fixed", "stuck")
     assert not row["false_certificate"], (row["coverage"], row["hole_area"],
                                           [h["reason"] for h in row["hid_by"][:4]])
+
+
+def test_rooms_are_booked_as_the_deployer_books_them():
+    """bench/truth.py seed 0 map 429 (two rooms, a 0.32 rv door): booked once found, a room
+    behind the door counted although no robot stood beyond its side any more, and the map
+    certified at 48% coverage (``--legacy-rooms``, the bench's rule until 2026-12-03).
+    Booked as the deployer books it (a room counts only while its robot stands beyond the
+    side: coordinator.jobs.beyond_side), the default, it certifies covered."""
+    case = truth.make_map(0, 429)
+    assert case.kind == "two_rooms"
+    held = truth.run_map(case)
+    assert held["end"] == "fixed" and not held["false_certificate"] and held["coverage"] > 0.995
+    legacy = truth.run_map(case, hold_rooms=False)
+    assert legacy["false_certificate"] and legacy["coverage"] < 0.6
