@@ -301,8 +301,9 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
     """(probing, marks) for the candidate sides ``ends`` not already marked, in (e,
     sigma) order: a side with probes left is probing (its deployments by via_frac); one
     with none left is marked closed ('probes', 'gap_probes', 'probe_clear',
-    'probe_unreachable', 'sweep_blocked', 'sweep_gap') or, with ``TopologyParams.clear_infers`` off and some probe clear,
-    probing with no deployment (the run ends uncertified). With ``TopologyParams.sweep``
+    'probe_unreachable', 'sweep_blocked', 'sweep_gap') or, with
+    ``TopologyParams.clear_infers`` off and some probe clear, probing with no deployment
+    (the run ends uncertified). With ``TopologyParams.sweep``
     a side of an edge with a triangle (one open side in ``open_sides``) is swept
     (:func:`_side_sweeps`); a dangling edge's sides are probed, and so is a side whose
     sweeps are over when a robot cut off from the swarm stopped one (``ev.foreign``)."""
