@@ -117,7 +117,6 @@ class Sweeper:
                  depth: float, n_touch: int = 8, rv: float = 1.0, landmarks=()):
         self.segs = np.asarray(segs, float)
         self.others = np.asarray(others, float).reshape(-1, 2)
-        self._near: tuple = ()          # robot_ahead's last 'robot': indices into others
         self._by: set[int] = set()      # the robots stops short met (SweepResult.by)
         self.E, self.Q = np.asarray(E, float), np.asarray(Q, float)
         self.L = float(np.linalg.norm(self.Q - self.E))
@@ -169,19 +168,23 @@ class Sweeper:
         pi/2 - pi/N of d, or whose body it would overlap: the agent stops when a robot's
         touch sector blocks its way (it knows Q by its bearing, and only when no other robot
         is there too); robots do not overlap."""
-        if not self.others.size:
+        k = self.robots_ahead(R, d)
+        if not len(k):
             return ""
+        if len(k) == 1 and np.linalg.norm(self.others[k[0]] - self.Q) < 1e-9:
+            return "Q"
+        return "robot"
+
+    def robots_ahead(self, R, d) -> np.ndarray:
+        """Indices into ``others`` of the robots that block motion along d from R
+        (:meth:`robot_ahead`)."""
+        if not self.others.size:
+            return np.zeros(0, np.int64)
         v = self.others - R
         dist = np.linalg.norm(v, axis=1)
         near = (dist < 2.0 * self.r + SKIN) & (
             (v @ d > math.cos(math.pi / 2.0 - self.w / 2.0) * dist) | (dist < 2.0 * self.r))
-        if not near.any():
-            return ""
-        k = np.nonzero(near)[0]
-        if len(k) == 1 and np.linalg.norm(self.others[k[0]] - self.Q) < 1e-9:
-            return "Q"
-        self._near = tuple(int(x) for x in k)
-        return "robot"
+        return np.nonzero(near)[0]
 
     # ------------------------------------------------------------------ the sweep
     def _into(self, R, n: float, limit: float = math.inf):
@@ -242,7 +245,7 @@ class Sweeper:
                 if block:
                     why.append(f"{phase}:{block}")
                     if block == "robot":
-                        self._by.update(self._near)
+                        self._by.update(int(x) for x in self.robots_ahead(R, d))
                     if phase == 1:
                         if block == "Q":
                             # the other end's body: it rests where the wall goes on

@@ -332,10 +332,9 @@ def _wide_gap():
 
 def test_a_gap_the_sweeps_left_is_probed_on_the_lines_in_it():
     """'sweep_gap' closed a side on no evidence of its own: the sweeps stopped short (a
-    robot in the way, lost landmarks), and a door in the gap would be certified over (a
-    rule since reverted certified bench/truth.py seed 0 map 429 at 48% that way). The probe
-    lines that fall in the gap are driven, and only those; all touched, the side closes on
-    evidence ('gap_probes', not reported as inferred)."""
+    robot in the way, lost landmarks), and a door in the gap would be certified over. The
+    probe lines that fall in the gap are driven, and only those; all touched, the side
+    closes on evidence ('gap_probes', not reported as inferred)."""
     cx, ev = _wide_gap()
     f = detect_fence(cx, **ev.fence_kwargs())
     e, side = _side(f, cx)

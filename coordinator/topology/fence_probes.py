@@ -313,11 +313,14 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
         if (e, sg) in marks:
             continue
         sweep = P.sweep and open_sides is not None and len(open_sides.get(e, ())) == 1
+        key = _side_key(cx, e, sg)
         gap_fracs = None
+        # how a side whose sweeps stopped short, with no room found, closes: 'sweep_gap'
+        # unless a robot of the swarm stood in the way of one ('sweep_blocked', below)
+        gap_why = "sweep_blocked" if P.gap_probes and key in ev.blocked else "sweep_gap"
         if sweep:
             inner, n_open, n_clear = _side_sweeps(cx, L, P, room, ev, e, sg)
             over = not inner and n_open > 0     # sweeps over, a gap left
-            key = _side_key(cx, e, sg)
             if over and key in ev.foreign:
                 # a robot cut off from the swarm stopped one: it stands in free space the
                 # complex does not hold, perhaps in the gap, and no inference closes that.
@@ -326,7 +329,7 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
                 # (closed, the room behind a 0.30 rv door was certified at 54% coverage:
                 # bench/unseen.py seed 0 map 8)
                 sweep = False
-            elif over and n_clear == 0 and P.gap_probes and key not in ev.blocked:
+            elif over and n_clear == 0 and P.gap_probes and gap_why == "sweep_gap":
                 # no end found room, no robot of the swarm stood in the way, and the gaps
                 # are no evidence of a wall: the probe lines that fall in them are driven
                 # (a touch at each, tilted as the probe rule asks, closes the side on
@@ -338,7 +341,7 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
             inner, n_open, n_clear = _side_probes(cx, L, P, room, ev, e, sg, gap_fracs)
         if inner:
             probing[(e, sg)] = sorted(inner, key=lambda d: d.via_frac)
-        elif not sweep and ev.found_at(_side_key(cx, e, sg)):
+        elif not sweep and ev.found_at(key):
             # a cut-off robot stopped its sweeps, a drive found room beyond it, and no probe
             # since got in (each touched, a jamb or a robot in the door, FOUND_TOUCH_LIMIT
             # times): neither evidence nor an inference closes it. Frontier with no
@@ -350,18 +353,16 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
             # every probe touched: closed on evidence (the probes of a swept side's gaps:
             # the sweeps followed the wall elsewhere)
             marks[(e, sg)] = "gap_probes" if gap_fracs else "probes"
-        elif sweep and n_clear == 0 and P.gap_probes and _side_key(cx, e, sg) in ev.blocked:
-            # sweeps stopped short from both ends as often as they may, and a robot of the
-            # swarm (linked to a source) stood in the way of one: closed, as an INFERENCE
-            # that the space it stands in, in front of the side, is the swarm's own. Probing
-            # these gaps placed robots there: seed 0, small 25 -> 33 robots, pillar_hall
-            # 122 -> 141, cave 128 -> 138 (README, "A gap the sweeps left is probed")
-            marks[(e, sg)] = "sweep_blocked"
         elif sweep and n_clear == 0:
             # sweeps stopped short (lost landmarks, the budget, a robot in the way) from
-            # both ends as often as they may, and a gap is left that no probe line falls in
-            # (or TopologyParams.gap_probes is off): closed, as an INFERENCE
-            marks[(e, sg)] = "sweep_gap"
+            # both ends as often as they may, and a gap is left: closed, as an INFERENCE.
+            # 'sweep_blocked': a robot of the swarm (linked to a source) stood in the way
+            # of one, and the space in front of the side is where it stands (probing such
+            # gaps placed robots there: seed 0, small 25 -> 33 robots, pillar_hall 122 ->
+            # 141, cave 128 -> 138; README, "A gap the sweeps left is probed").
+            # 'sweep_gap': no probe line falls in the gap (or TopologyParams.gap_probes
+            # is off)
+            marks[(e, sg)] = gap_why
         elif sweep and P.clear_infers:
             marks[(e, sg)] = "probe_clear"    # inferred: an end's sweep found room
         elif n_open == 0 and P.clear_infers:
