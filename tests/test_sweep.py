@@ -316,16 +316,18 @@ def test_a_touch_that_could_not_sweep_counts_a_try_but_joins_nothing():
     assert side.reason == "gap_probes" and e in f.obstacle.tolist() and not f.inferred
 
 
-def _wide_gap():
+def _wide_gap(by=()):
     """Both ends' sweeps over, u's joined (-inf, 0.2], v's [0.55, +inf): the gap (0.2,
-    0.55) holds the probe lines at 0.25 and 0.5."""
+    0.55) holds the probe lines at 0.25 and 0.5. ``by``: the robots seen where a touch
+    stopped u's sweeps."""
     cx, ev = _candidate()
     a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
     ev.record(b, touched=True, swept=(0.45, -INF))        # v covers [0.55, +inf)
-    ev.record(a, touched=True, swept=(0.2, -INF))
+    ev.record(a, touched=True, swept=(0.2, -INF), by=by)
     for _ in range(TopologyParams().sweep_tries - 1):
         for d in _sweeps(detect_fence(cx, **ev.fence_kwargs())):
-            ev.record(d, touched=True, swept=(0.2, -INF) if d.vertex == 0 else (0.45, -INF))
+            ev.record(d, touched=True, swept=(0.2, -INF) if d.vertex == 0 else (0.45, -INF),
+                      by=by if d.vertex == 0 else ())
     assert not _sweeps(detect_fence(cx, **ev.fence_kwargs()))
     return cx, ev
 
@@ -355,19 +357,6 @@ def test_a_gap_probe_that_finds_room_closes_only_as_inferred():
     assert side.reason == "probe_clear" and (e, "probe_clear") in [(int(k), w) for k, w in f.inferred]
 
 
-def _wide_gap_by(by):
-    """_wide_gap's evidence with u's sweeps stopped by the robots ``by``."""
-    cx, ev = _candidate()
-    a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
-    ev.record(b, touched=True, swept=(0.45, -INF))
-    ev.record(a, touched=True, swept=(0.2, -INF), by=by)
-    for _ in range(TopologyParams().sweep_tries - 1):
-        for d in _sweeps(detect_fence(cx, **ev.fence_kwargs())):
-            ev.record(d, touched=True, swept=(0.2, -INF) if d.vertex == 0 else (0.45, -INF),
-                      by=by if d.vertex == 0 else ())
-    return cx, ev
-
-
 @pytest.mark.parametrize("case, probed", [("member", False), ("cut_off", True),
                                           ("gone", True), ("nobody", True)])
 def test_a_gap_a_robot_of_the_swarm_stopped_the_sweeps_at_is_not_probed(case, probed):
@@ -377,7 +366,7 @@ def test_a_gap_a_robot_of_the_swarm_stopped_the_sweeps_at_is_not_probed(case, pr
     (coordinator.jobs.evidence_kwargs: the stopper is a robot a source reaches now). A
     stopper cut off from the swarm, or gone, or none, leaves the gap to its probe lines."""
     from swarmcover.coordinator.jobs import evidence_kwargs
-    cx, ev = _wide_gap_by(() if case == "nobody" else (42,))
+    cx, ev = _wide_gap(() if case == "nobody" else (42,))
     snap = _tri_snap(cut=(case == "cut_off"))
     if case == "gone":
         snap = Snapshot(occupant={0: 0, 1: 1, 2: 2}, nbrs={i: _nbrs(TRI, i) for i in range(3)},
