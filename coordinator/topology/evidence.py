@@ -258,6 +258,8 @@ class Evidence:
         # interior probes a drive went clear at (room found beyond the side) -> the probes
         # that touched there since: no evidence of a wall (:meth:`found_rooms`)
         self._found: dict[ProbeKey, int] = {}
+        # sides the planner asked to be swept before deploying (CyclePlan.sweep_first)
+        self._asked: set[SideKey] = set()
 
     # ---------------------------------------------------------------- recording
     def record(self, dep, touched: bool, *, direction: float | None = None,
@@ -453,6 +455,16 @@ class Evidence:
         return {k: n for k, n in self._sweep_tries.items()
                 if present is None or (k[0] in present and k[1] in present)}
 
+    def ask_sweeps(self, sides: Iterable[SideKey]) -> None:
+        """Keep the sides (u, v, sigma) a plan asked to be swept first
+        (``TopologyParams.sweep_fallbacks``): detect_fence's ``sweep_first`` from now on."""
+        self._asked.update((int(k[0]), int(k[1]), int(k[2])) for k in sides)
+
+    def asked_sweeps(self, present: Container[int] | None = None) -> frozenset[SideKey]:
+        """The sides asked (:meth:`ask_sweeps`) whose ends are in ``present``."""
+        return frozenset(k for k in self._asked
+                         if present is None or (k[0] in present and k[1] in present))
+
     def sweep_stoppers(self, present: Container[int] | None = None
                        ) -> dict[SideKey, frozenset[int]]:
         """side (u, v, sigma) -> the robots (ids, not nodes) seen where a touch stopped one
@@ -464,13 +476,18 @@ class Evidence:
                      beyond: Callable[[ProbeKey, int], bool] | None = None) -> dict:
         """Keyword arguments for detect_fence: test_drive_failures, probe_failures,
         probe_offsets, tilt_failures, probe_clear, probe_found, probe_unreachable,
-        probe_fracs, sweeps and sweep_tries (restricted to nodes in ``present`` when
+        probe_fracs, sweeps, sweep_tries and sweep_first (restricted to nodes in ``present`` when
         given; with ``beyond``, less the :meth:`lost_rooms` and their tries)."""
         lost = self.lost_rooms(beyond) if beyond is not None else frozenset()
         tries = self.sweep_tries(present)
         for k in lost & tries.keys():
             tries[k] = max(0, tries[k] - self._placed_n.get(k, 1))
         clear = self.clear_probes(present) - lost
+        asked = self.asked_sweeps(present)
+        # a free sweep of an asked side that drove clear and came home found room there:
+        # done, no evidence, and the side goes back to its deployments (fence_probes'
+        # keep_evidence) rather than wait for a push to leave a robot where it went
+        clear |= {k for k in self.returned_probes(present) if k[:3] in asked}
         return dict(test_drive_failures=self.failed_directions(present),
                     probe_failures=self.failed_probes(present),
                     probe_offsets=self.probe_offsets(present),
@@ -481,7 +498,8 @@ class Evidence:
                     probe_unreachable=self.unreachable_probes(present),
                     probe_fracs=self.fractions,
                     sweeps=self.sweeps(present),
-                    sweep_tries=tries)
+                    sweep_tries=tries,
+                    sweep_first=asked)
 
     def merge_failures(self, failures: Mapping[int, list[float]]) -> None:
         """Adopt failed directions kept elsewhere (e.g. a restarted coordinator)."""

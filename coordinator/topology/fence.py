@@ -36,7 +36,8 @@ from scipy.sparse.csgraph import dijkstra
 from .complex import Complex
 from .fence_deploy import resolve_sides, robot_deployments
 from .fence_local import _Local
-from .fence_probes import corner_candidates, forced_marks, plan_probes, probe_evidence
+from .fence_probes import (asked_candidates, corner_candidates, forced_marks, keep_evidence,
+                           plan_probes, probe_evidence)
 from .fence_sides import (Room, both_touch, corner_wait_marks, find_open_sides, one_sided,
                           test_drive_rule)
 from .fence_types import Deployment, Fence, FenceEdge, FenceSide
@@ -109,6 +110,7 @@ def detect_fence(
     sweep_tries=None,
     sweep_foreign=(),
     sweep_blocked=(),
+    sweep_first=(),
 ) -> Fence:
     """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
 
@@ -198,6 +200,11 @@ def detect_fence(
       a gap left and no room found is probed on the probe lines in its gaps (closed on
       evidence, 'gap_probes', once they all touched) unless it is blocked: then it closes
       as the inference 'sweep_blocked'; a gap no probe line falls in as 'sweep_gap'.
+    sweep_first: sides (u, v, sigma) the planner asked to be swept before deploying
+      (``TopologyParams.sweep_fallbacks``): an open side of an edge with a triangle that
+      is no candidate becomes one ('sweep_first'), and closes only on evidence; an
+      inference its sweeps would lead to, or nothing left to drive, leaves it a plain
+      frontier side (fence_probes.keep_evidence).
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
       e.g. edges reclassified after a failed test drive in an earlier cycle.
     default_bearing: first deployment direction (rad, body frame) of a robot with no
@@ -220,7 +227,9 @@ def detect_fence(
                         probe_found, sweep_blocked)
     if P.corner_probes:
         marks, ends = corner_candidates(marks, ends, open_sides)
+    ends, asked = asked_candidates(cx, open_sides, ends, marks, sweep_first)
     probing, marks = plan_probes(cx, L, P, room, ev, ends, marks, open_sides)
+    marks, probing = keep_evidence(asked, marks, probing)
     marks = forced_marks(cx, forced_obstacle, marks)
     fence_edges, K, O, z, deps = resolve_sides(cx, L, open_sides, marks, probing, room)
     deployments = robot_deployments(cx, L, room, deps, default_bearing)

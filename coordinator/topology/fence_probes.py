@@ -29,7 +29,7 @@ from .evidence import (FOUND_TOUCH_LIMIT, TILT_MATCH, needs_tilt, probe_depth_rv
                        probe_fractions, sweep_gaps)
 from .fence_local import _Local
 from .fence_sides import Marks, Room, Sides
-from .fence_types import Deployment
+from .fence_types import EVIDENCE, Deployment
 from .params import TopologyParams
 
 __all__: list[str] = []
@@ -223,10 +223,13 @@ def _end_ray(L: _Local, p: int, q: int, s: int, margin: float) -> float:
     return min(max(wedge - math.pi, 0.0) + margin, math.pi / 2.0)
 
 
-def _no_room_direction(L: _Local, room: Room, p: int, q: int, s: int) -> float:
+def _no_room_direction(L: _Local, room: Room, p: int, q: int, s: int,
+                       borrow: bool = False) -> float:
     """The direction (rad, p's frame) a sweep from p on side s of edge p-q first drives:
     of p's failed drives and its wall contact on that side, the one nearest the edge's
-    perpendicular (it met the wall before); the perpendicular when there is none."""
+    perpendicular (it met the wall before); with none and ``borrow``, q's wall contact
+    turned into p's frame (by the two robots' bearings of each other), when it points into
+    the side: the normal of the wall q rests on; else the perpendicular."""
     t0 = L.bearings(p)[q]
     perp = wrap(t0 + s * math.pi / 2.0)
     cands = list(room.failed.get(p, ()))
@@ -234,11 +237,17 @@ def _no_room_direction(L: _Local, room: Room, p: int, q: int, s: int) -> float:
     if c is not None:
         cands.append(c)
     on_side = [d for d in cands if 0.0 < s * wrap(d - t0) < math.pi]
+    if not on_side and borrow:
+        cq = room.contact(q)
+        if cq is not None:
+            d = wrap(cq + t0 - L.bearings(q)[p] - math.pi)
+            if 0.0 < s * wrap(d - t0) < math.pi:
+                return d
     return min(on_side, key=lambda d: abs(wrap(d - perp))) if on_side else perp
 
 
 def _side_sweeps(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: ProbeEvidence,
-                 e: int, sg: int) -> tuple[list[Deployment], int, int]:
+                 e: int, sg: int, borrow: bool = False) -> tuple[list[Deployment], int, int]:
     """(sweeps still to drive, n_open, n_clear) of side sg of edge e (wall sweeps,
     coordinator.topology.evidence): closed on evidence (no deployment, n_open 0, n_clear
     0) once its ends' joined intervals cover (-inf, +inf); else a sweep from each end
@@ -270,7 +279,7 @@ def _side_sweeps(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Prob
         lo, hi = (-math.inf, far_u) if end == 0.0 else (1.0 - far_v, math.inf)
         if not any(a < hi and b > lo for a, b in gaps) or tries.get(key, 0) >= P.sweep_tries:
             continue
-        d = _no_room_direction(L, room, p, q, s)
+        d = _no_room_direction(L, room, p, q, s, borrow)
         out.append(Deployment(int(ids[p]), d, (iu, iv), sg, wrap(d - L.bearings(p)[q]),
                               L.clearance(p, d), "probe", 0.0, P.sweep_depth / P.rv, 0.0,
                               round(far, 3), _end_ray(L, p, q, s, P.sweep_margin)))
@@ -288,6 +297,13 @@ def _gap_fracs(ev: ProbeEvidence, side) -> tuple[float, ...]:
     gaps = sweep_gaps(ev.sweeps.get(tuple(side), ()) if ev.sweeps else ())
     return tuple(g for g in ev.fracs if 1e-9 < g < 1.0 - 1e-9
                  and any(a < g < b for a, b in gaps))
+
+
+def _unbounded_gap(ev: ProbeEvidence, side) -> bool:
+    """A gap the sweeps of ``side`` (u, v, sigma) left runs to a ray at an end (-inf or
+    +inf: in front of u or v, where only the end's own evidence speaks)."""
+    gaps = sweep_gaps(ev.sweeps.get(tuple(side), ()) if ev.sweeps else ())
+    return any(a == -math.inf or b == math.inf for a, b in gaps)
 
 
 def _side_key(cx: Complex, e: int, sg: int) -> tuple[int, int, int]:
@@ -319,8 +335,18 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
         # unless a robot of the swarm stood in the way of one ('sweep_blocked', below)
         gap_why = "sweep_blocked" if P.gap_probes and key in ev.blocked else "sweep_gap"
         if sweep:
-            inner, n_open, n_clear = _side_sweeps(cx, L, P, room, ev, e, sg)
+            asked = ends[(e, sg)] == "sweep_first"
+            # an asked side's end with no wall of its own drives along its partner's wall
+            # normal: the side's own normal may cross the strip along that wall obliquely,
+            # deeper than the no-room depth (README, "Where the robots go")
+            inner, n_open, n_clear = _side_sweeps(cx, L, P, room, ev, e, sg, borrow=asked)
             over = not inner and n_open > 0     # sweeps over, a gap left
+            if over and asked and (key in ev.foreign or _unbounded_gap(ev, key)):
+                # a side asked to be swept (asked_candidates) has no end's evidence of a
+                # wall: the probe rule's lines (which leave the ends to that evidence)
+                # prove nothing of it, nor do gap lines when a gap runs past an end. Left
+                # unmarked and undriven, it goes back to its deployments (keep_evidence)
+                continue
             if over and key in ev.foreign:
                 # a robot cut off from the swarm stopped one: it stands in free space the
                 # complex does not hold, perhaps in the gap, and no inference closes that.
@@ -386,6 +412,45 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
             # with no deployment: the run ends uncertified (honest), never a closure
             probing[(e, sg)] = []
     return probing, marks
+
+
+def asked_candidates(cx: Complex, open_sides: Sides, ends: Marks, marks: Marks,
+                     sweep_first=()) -> tuple[Marks, set[tuple[int, int]]]:
+    """(ends, asked): ``ends`` plus 'sweep_first' for each side in ``sweep_first`` (u, v,
+    sigma node ids) that is open, of an edge with a triangle (so it is swept), and neither
+    a candidate nor marked already; ``asked`` those (e, sigma). The planner asks this of a
+    side whose deployment found no free lattice point at a robot resting on a wall
+    (coordinator.planner, ``TopologyParams.sweep_fallbacks``): swept first, it closes only
+    on the sweeps' evidence (:func:`keep_evidence`), never by an inference it would not
+    have met as a plain frontier side."""
+    ends = dict(ends)
+    asked: set[tuple[int, int]] = set()
+    want = {(int(k[0]), int(k[1]), int(k[2])) for k in sweep_first}
+    if not want:
+        return ends, asked
+    for e, recs in open_sides.items():
+        if len(recs) != 1:
+            continue
+        sg = recs[0][0]
+        if (e, sg) in ends or (e, sg) in marks or _side_key(cx, e, sg) not in want:
+            continue
+        ends[(e, sg)] = "sweep_first"
+        asked.add((e, sg))
+    return ends, asked
+
+
+def keep_evidence(asked, marks: Marks, probing: dict) -> tuple[Marks, dict]:
+    """``marks`` and ``probing`` with each ``asked`` side (:func:`asked_candidates`) left a
+    plain frontier side unless its sweeps closed it on evidence (``fence_types.EVIDENCE``)
+    or it still has sweeps or probes to drive: an inference ('sweep_blocked', 'sweep_gap',
+    'probe_clear', ...) or nothing left to try sends it back to its deployments."""
+    marks, probing = dict(marks), dict(probing)
+    for side in asked:
+        if side in marks and marks[side] not in EVIDENCE:
+            del marks[side]
+        if side in probing and not probing[side]:
+            del probing[side]
+    return marks, probing
 
 
 def forced_marks(cx: Complex, forced_obstacle, marks: Marks) -> Marks:
