@@ -112,6 +112,11 @@ class CoordinatorConfig:
                                    # (evidence, 'gap_probes'), not as the inference
                                    # 'sweep_gap' (coordinator.topology.params). false: the
                                    # rule until 2026-12-03
+    sweep_fallbacks: bool = False  # a push whose deployment finds no free lattice point,
+                                   # from a robot resting on a wall, sweeps its side first
+                                   # instead; the side closes only on the sweeps' evidence
+                                   # (coordinator.topology.params). false: deployed at the
+                                   # spec's direction (the rule until 2026-12-03)
     free_probes: bool = True       # frontier robots off every push probe their sides in the
                                    # same cycle without a path, and come back home whatever
                                    # they found (a clear one is no evidence; a push takes that
@@ -187,7 +192,8 @@ class CoordinatorConfig:
                               beta=math.radians(self.beta_deg), n_touch=self.n_touch,
                               w_obstacle=self.w_obstacle, d_td=self.d_td_rv * self.rv,
                               redundancy_period=self.redundancy_period, sweep=self.sweep,
-                              sweep_lenses=self.sweep_lenses, gap_probes=self.gap_probes)
+                              sweep_lenses=self.sweep_lenses, gap_probes=self.gap_probes,
+                              sweep_fallbacks=self.sweep_fallbacks)
 
     @classmethod
     def from_section(cls, section: dict | None, rv: float, where: str = "config") -> "CoordinatorConfig":

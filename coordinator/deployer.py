@@ -332,6 +332,7 @@ class Deployer:
             sweeps_last=self.cfg.sweeps_last, out=frozenset(out),
             sweeps_free=self.cfg.sweeps_free, free_max=self.cfg.free_max)
         self.next_vertex += len(plan.jobs)
+        self.evidence.ask_sweeps(plan.sweep_first)
         self.redundant = set(plan.redundant)
         if carried or waiting:
             # nothing is certified while a probe is out (the snapshot holds its vertex's

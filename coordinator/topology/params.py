@@ -75,6 +75,12 @@ class TopologyParams:
       space in front of the side is where that robot stands); a gap no line falls in
       (narrower than door_min_rv, or in front of an end) still closes as the inference
       'sweep_gap'. False: every such side closes as 'sweep_gap' (the rule until 2026-12-03).
+    sweep_fallbacks: a push whose deployment finds no free lattice point (the planner's
+      fallback, the spec's direction at the spacing) from a robot resting on a wall (its
+      contact) is not driven: its side is asked to be swept first
+      (coordinator.planner, detect_fence's ``sweep_first``) and closes only on the sweeps'
+      evidence; else it is deployed as before. The fallbacks laid second rows of robots
+      along the walls (README, "Where the robots go").
     """
 
     rv: float = 1.0
@@ -95,6 +101,7 @@ class TopologyParams:
     sweep_tries: int = 2
     sweep_lenses: bool = True
     gap_probes: bool = True
+    sweep_fallbacks: bool = False
 
     def __post_init__(self) -> None:
         if self.eps is None:
