@@ -83,7 +83,7 @@ def test_a_returned_probe_is_no_evidence_and_keeps_its_side_open():
     assert set(ev.fence_kwargs()) == {"test_drive_failures", "probe_failures", "probe_clear",
                                       "probe_found", "probe_unreachable", "probe_fracs",
                                       "probe_offsets", "tilt_failures", "sweeps",
-                                      "sweep_tries", "sweep_first"}
+                                      "sweep_tries", "sweep_first", "sweep_home"}
     # every other probe touches: the side stays frontier, the returned one still offered
     # (a recorded CLEAR probe would now close it as the inference 'probe_clear')
     for d in probes:

@@ -121,6 +121,23 @@ def test_a_free_sweep_that_came_home_clear_sends_an_asked_side_back_to_its_deplo
             assert side.reason == "probing" and [d.vertex for d in _sweeps(f)] == [0]
 
 
+def test_a_side_that_became_a_candidate_of_its_own_counts_a_sweep_home_as_nothing():
+    """The free sweep that came home clear ends an asked side's end only while the side is
+    asked: once both ends have no room of their own (a candidate by the test-drive rule),
+    no room anybody holds is counted there, and that end sweeps again."""
+    cx, ev = _plain()
+    a, b = _sweeps(detect_fence(cx, **_asked(ev)))
+    ev.record(a, touched=False, returned=True)
+    ev.record(b, touched=True, swept=(0.55, -INF))
+    for _ in range(2):        # both ends' drives into the side touch, as in _candidate
+        for d in _edge_deps(detect_fence(cx, test_drive_failures=ev.failed_directions())):
+            ev.record(d, touched=True)
+    f = detect_fence(cx, **ev.fence_kwargs())
+    e, side = _side(f, cx)
+    assert side.reason == "probing" and [d.vertex for d in _sweeps(f)] == [0]
+    assert not f.inferred
+
+
 def test_a_gap_in_front_of_an_end_is_no_gap_probes_evidence_for_an_asked_side():
     """A candidate's ends felt the wall in front of them; an asked side's did not. Sweeps
     that left (-inf, 0.3) open, gap lines at 0.25 touched: a candidate would close on

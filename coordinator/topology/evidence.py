@@ -476,7 +476,7 @@ class Evidence:
                      beyond: Callable[[ProbeKey, int], bool] | None = None) -> dict:
         """Keyword arguments for detect_fence: test_drive_failures, probe_failures,
         probe_offsets, tilt_failures, probe_clear, probe_found, probe_unreachable,
-        probe_fracs, sweeps, sweep_tries and sweep_first (restricted to nodes in ``present`` when
+        probe_fracs, sweeps, sweep_tries, sweep_first and sweep_home (restricted to nodes in ``present`` when
         given; with ``beyond``, less the :meth:`lost_rooms` and their tries)."""
         lost = self.lost_rooms(beyond) if beyond is not None else frozenset()
         tries = self.sweep_tries(present)
@@ -484,10 +484,6 @@ class Evidence:
             tries[k] = max(0, tries[k] - self._placed_n.get(k, 1))
         clear = self.clear_probes(present) - lost
         asked = self.asked_sweeps(present)
-        # a free sweep of an asked side that drove clear and came home found room there:
-        # done, no evidence, and the side goes back to its deployments (fence_probes'
-        # keep_evidence) rather than wait for a push to leave a robot where it went
-        clear |= {k for k in self.returned_probes(present) if k[:3] in asked}
         return dict(test_drive_failures=self.failed_directions(present),
                     probe_failures=self.failed_probes(present),
                     probe_offsets=self.probe_offsets(present),
@@ -499,7 +495,9 @@ class Evidence:
                     probe_fracs=self.fractions,
                     sweeps=self.sweeps(present),
                     sweep_tries=tries,
-                    sweep_first=asked)
+                    sweep_first=asked,
+                    sweep_home=frozenset(k for k in self.returned_probes(present)
+                                         if k[:3] in asked))
 
     def merge_failures(self, failures: Mapping[int, list[float]]) -> None:
         """Adopt failed directions kept elsewhere (e.g. a restarted coordinator)."""

@@ -111,6 +111,7 @@ def detect_fence(
     sweep_foreign=(),
     sweep_blocked=(),
     sweep_first=(),
+    sweep_home=(),
 ) -> Fence:
     """Frontier and obstacle edges with their deployment bearings (spec 3.1-3.4).
 
@@ -204,7 +205,9 @@ def detect_fence(
       (``TopologyParams.sweep_fallbacks``): an open side of an edge with a triangle that
       is no candidate becomes one ('sweep_first'), and closes only on evidence; an
       inference its sweeps would lead to, or nothing left to drive, leaves it a plain
-      frontier side (fence_probes.keep_evidence).
+      frontier side (fence_probes.keep_evidence). sweep_home: sweep keys (u, v, sigma,
+      end) of asked sides whose free sweep drove clear and came home: that end is done
+      while the side is asked, and nothing otherwise.
     forced_obstacle: edges (pairs of node ids) whose open sides are obstacle sides,
       e.g. edges reclassified after a failed test drive in an earlier cycle.
     default_bearing: first deployment direction (rad, body frame) of a robot with no
@@ -224,7 +227,7 @@ def detect_fence(
     marks = corner_wait_marks(corner_wait, marks, room)
     ev = probe_evidence(probe_failures, probe_fracs, probe_unreachable, probe_clear,
                         probe_offsets, tilt_failures, sweeps, sweep_tries, sweep_foreign,
-                        probe_found, sweep_blocked)
+                        probe_found, sweep_blocked, sweep_home)
     if P.corner_probes:
         marks, ends = corner_candidates(marks, ends, open_sides)
     ends, asked = asked_candidates(cx, open_sides, ends, marks, sweep_first)

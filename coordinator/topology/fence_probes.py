@@ -80,6 +80,8 @@ class ProbeEvidence:
     outside the sources' part of the complex stopped. found: key -> probes touched there
     since a drive went clear at it (room found; no robot holds it now). blocked: sides
     (u, v, sigma) one of whose sweeps a robot of the swarm (linked to a source) stopped.
+    home: sweep keys (u, v, sigma, end) of sides asked to be swept first whose free sweep
+    drove clear and came home: done for that asked side only (:func:`_side_sweeps`).
     """
 
     fracs: tuple
@@ -93,6 +95,7 @@ class ProbeEvidence:
     foreign: frozenset = frozenset()
     found: dict = None
     blocked: frozenset = frozenset()
+    home: frozenset = frozenset()
 
     def gave_up(self, key, end: int) -> bool:
         return (key, end) in self.unreached
@@ -105,7 +108,7 @@ class ProbeEvidence:
 def probe_evidence(probe_failures=(), probe_fracs=None, probe_unreachable=(), probe_clear=(),
                    probe_offsets=None, tilt_failures=(), sweeps=None,
                    sweep_tries=None, sweep_foreign=(), probe_found=None,
-                   sweep_blocked=()) -> ProbeEvidence:
+                   sweep_blocked=(), sweep_home=()) -> ProbeEvidence:
     """detect_fence's probe keywords (same names and meaning) as a :class:`ProbeEvidence`;
     the fractions default to ``evidence.probe_fractions()``."""
     fracs = tuple(probe_fracs) if probe_fracs is not None else probe_fractions()
@@ -128,8 +131,9 @@ def probe_evidence(probe_failures=(), probe_fracs=None, probe_unreachable=(), pr
              if (int(k[0]), int(k[1]), int(k[2])) in foreign}
     pfail -= found.keys()
     blocked = frozenset((int(k[0]), int(k[1]), int(k[2])) for k in sweep_blocked)
+    home = frozenset(_key(k) for k in sweep_home)
     return ProbeEvidence(fracs, frozenset(pfail), poff, tfail, frozenset(pclear),
-                         frozenset(punreach), swept, tries, foreign, found, blocked)
+                         frozenset(punreach), swept, tries, foreign, found, blocked, home)
 
 
 def corner_candidates(marks: Marks, ends: Marks, open_sides: Sides) -> tuple[Marks, Marks]:
@@ -273,8 +277,13 @@ def _side_sweeps(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Prob
     n_clear = 0
     for p, q, end, s, far in ((u, v, 0.0, sg, far_u), (v, u, 1.0, -sg, far_v)):
         key = (iu, iv, sg, end)
-        if key in ev.clear:
-            n_clear += 1               # found room from this end: its robot stayed there
+        if key in ev.clear or (borrow and key in ev.home):
+            # found room from this end: its robot stayed there; or, the side asked to be
+            # swept first (borrow), its free sweep came home clear: done, no evidence,
+            # and the side goes back to its deployments (keep_evidence) rather than wait
+            # for a push to leave a robot wherever that sweep went. Only while asked: a
+            # side that became a candidate of its own counts such a sweep as nothing
+            n_clear += 1
             continue
         lo, hi = (-math.inf, far_u) if end == 0.0 else (1.0 - far_v, math.inf)
         if not any(a < hi and b > lo for a, b in gaps) or tries.get(key, 0) >= P.sweep_tries:
