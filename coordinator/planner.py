@@ -280,10 +280,8 @@ def _fallback_sides(snap: Snapshot, jobs: list[JobSpec]) -> frozenset:
     for job in jobs:
         dep = job.deployment
         f = job.path[-1]
-        if (job.placed != Placed.SPEC or job.kind != "edge" or job.free or dep is None
-                or getattr(dep, "edge", None) is None):
-            continue
-        if f in snap.contact:
+        if (job.placed == Placed.SPEC and job.kind == "edge" and not job.free
+                and dep is not None and dep.edge is not None and f in snap.contact):
             out.add((int(dep.edge[0]), int(dep.edge[1]), int(dep.sigma)))
     return frozenset(out)
 

@@ -230,9 +230,9 @@ def detect_fence(
                         probe_found, sweep_blocked, sweep_home)
     if P.corner_probes:
         marks, ends = corner_candidates(marks, ends, open_sides)
-    ends, asked = asked_candidates(cx, open_sides, ends, marks, sweep_first)
+    ends = asked_candidates(cx, open_sides, ends, marks, sweep_first)
     probing, marks = plan_probes(cx, L, P, room, ev, ends, marks, open_sides)
-    marks, probing = keep_evidence(asked, marks, probing)
+    marks, probing = keep_evidence(ends, marks, probing)
     marks = forced_marks(cx, forced_obstacle, marks)
     fence_edges, K, O, z, deps = resolve_sides(cx, L, open_sides, marks, probing, room)
     deployments = robot_deployments(cx, L, room, deps, default_bearing)

@@ -424,35 +424,36 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
 
 
 def asked_candidates(cx: Complex, open_sides: Sides, ends: Marks, marks: Marks,
-                     sweep_first=()) -> tuple[Marks, set[tuple[int, int]]]:
-    """(ends, asked): ``ends`` plus 'sweep_first' for each side in ``sweep_first`` (u, v,
-    sigma node ids) that is open, of an edge with a triangle (so it is swept), and neither
-    a candidate nor marked already; ``asked`` those (e, sigma). The planner asks this of a
-    side whose deployment found no free lattice point at a robot resting on a wall
-    (coordinator.planner, ``TopologyParams.sweep_fallbacks``): swept first, it closes only
-    on the sweeps' evidence (:func:`keep_evidence`), never by an inference it would not
-    have met as a plain frontier side."""
-    ends = dict(ends)
-    asked: set[tuple[int, int]] = set()
+                     sweep_first=()) -> Marks:
+    """``ends`` plus 'sweep_first' for each side in ``sweep_first`` (u, v, sigma node ids)
+    that is open, of an edge with a triangle (so it is swept), and neither a candidate nor
+    marked already. The planner asks this of a side whose deployment found no free lattice
+    point at a robot resting on a wall (coordinator.planner,
+    ``TopologyParams.sweep_fallbacks``): swept first, it closes only on the sweeps'
+    evidence (:func:`keep_evidence`), never by an inference it would not have met as a
+    plain frontier side."""
     want = {(int(k[0]), int(k[1]), int(k[2])) for k in sweep_first}
     if not want:
-        return ends, asked
+        return ends
+    ends = dict(ends)
     for e, recs in open_sides.items():
         if len(recs) != 1:
             continue
         sg = recs[0][0]
-        if (e, sg) in ends or (e, sg) in marks or _side_key(cx, e, sg) not in want:
-            continue
-        ends[(e, sg)] = "sweep_first"
-        asked.add((e, sg))
-    return ends, asked
+        if (e, sg) not in ends and (e, sg) not in marks and _side_key(cx, e, sg) in want:
+            ends[(e, sg)] = "sweep_first"
+    return ends
 
 
-def keep_evidence(asked, marks: Marks, probing: dict) -> tuple[Marks, dict]:
-    """``marks`` and ``probing`` with each ``asked`` side (:func:`asked_candidates`) left a
-    plain frontier side unless its sweeps closed it on evidence (``fence_types.EVIDENCE``)
-    or it still has sweeps or probes to drive: an inference ('sweep_blocked', 'sweep_gap',
-    'probe_clear', ...) or nothing left to try sends it back to its deployments."""
+def keep_evidence(ends: Marks, marks: Marks, probing: dict) -> tuple[Marks, dict]:
+    """``marks`` and ``probing`` with each side ``ends`` holds as 'sweep_first'
+    (:func:`asked_candidates`) left a plain frontier side unless its sweeps closed it on
+    evidence (``fence_types.EVIDENCE``) or it still has sweeps or probes to drive: an
+    inference ('sweep_blocked', 'sweep_gap', 'probe_clear', ...) or nothing left to try
+    sends it back to its deployments."""
+    asked = [side for side, why in ends.items() if why == "sweep_first"]
+    if not asked:
+        return marks, probing
     marks, probing = dict(marks), dict(probing)
     for side in asked:
         if side in marks and marks[side] not in EVIDENCE:
