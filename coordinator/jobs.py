@@ -208,7 +208,8 @@ def evidence_kwargs(evidence: Evidence, snap: Snapshot, cut_off=frozenset()) -> 
     room counts only while its robot's vertex stands beyond the side (:func:`beyond_side`).
     ``sweep_foreign``: the sides a sweep of which a robot cut off from the swarm stopped,
     one sent away as such (``cut_off``: robot ids) or one of ``snap`` no source reaches;
-    ``sweep_blocked``: those a robot of ``snap`` a source reaches stopped."""
+    ``sweep_blocked``: those a robot stopped standing still at a vertex that a robot of
+    ``snap`` a source reaches holds now (:meth:`Evidence.stopper_vertices`)."""
     linked = source_component(snap)
     kw = evidence.fence_kwargs(snap.occupant,
                                beyond_side(snap, linked if snap.sources else None))
@@ -219,10 +220,13 @@ def evidence_kwargs(evidence: Evidence, snap: Snapshot, cut_off=frozenset()) -> 
     outside = set(cut_off) | {r for v, r in snap.occupant.items() if v not in linked}
     stoppers = evidence.sweep_stoppers(snap.occupant)
     kw["sweep_foreign"] = frozenset(k for k, by in stoppers.items() if by & outside)
-    # a sweep stopped by a robot of the swarm, linked to a source now: the space in front
-    # of the side is where it stands (fence_probes: 'sweep_blocked', not probed)
-    members = {r for v, r in snap.occupant.items() if v in linked} - set(cut_off)
-    kw["sweep_blocked"] = frozenset(k for k, by in stoppers.items() if by & members)
+    # a sweep stopped by a robot of the swarm standing still at a vertex that a robot
+    # linked to a source holds now (the stopper, or the one a push put in its place): the
+    # space in front of the side is where it stands (fence_probes: 'sweep_blocked', not
+    # probed). A stopper that was moving vouches for no place: the gap is the gap rules'
+    held = {v for v, r in snap.occupant.items() if v in linked and r not in cut_off}
+    places = evidence.stopper_vertices(snap.occupant)
+    kw["sweep_blocked"] = frozenset(k for k, at in places.items() if at & held)
     return kw
 
 

@@ -517,16 +517,28 @@ class Pushes:
             # in td_contacts, never as a wall the robot at the vertex rests against. A wall
             # sweep ("swept HI LO") also books the part of the edge it joined
             self._record(spec, touched=True, contact_offset=td.touch_offset, swept=swept,
-                         by=sweep_stoppers(td.reason))
+                         by=self._stopper_places(sweep_stoppers(td.reason)))
             log.info("cycle %d: test drive from vertex %d touched an obstacle (%s): fence "
                      "side of %s", self.cycle, spec.path[-1], td.reason, spec.frontier_edge)
             if "(return" not in td.reason and self._retry(job):
                 return
         job.cancel("test drive touched an obstacle")
 
+    def _stopper_places(self, robots: tuple[int, ...]) -> dict[int, int | None]:
+        """A sweep's stoppers -> the vertex each holds standing still now (None: it is
+        moving, or holds none): only a robot standing at a place of the fixed graph vouches
+        for the space in front of the side (Evidence.stopper_vertices)."""
+        holder = self.placement.holders(self.roster)
+        moving = self._in_motion(holder)
+        out = {}
+        for r in robots:
+            v = self.placement.vertex_of.get(int(r))
+            out[int(r)] = v if v is not None and holder.get(v) == r and v not in moving else None
+        return out
+
     def _record(self, spec, touched: bool, contact_offset: float = 0.0,
                 swept: tuple[float, float] | None = None, placed: int | None = None,
-                by: tuple[int, ...] = ()) -> None:
+                by=()) -> None:
         """Book a drive's outcome (coordinator.topology.evidence): the direction actually
         driven, for a touch the agent's touch_offset (sector centre - direction), for a
         wall sweep the (hi, lo) it joined and the robots seen where a touch stopped it."""

@@ -445,3 +445,22 @@ def test_a_probe_that_would_cut_the_pushes_off_their_frontier_is_waited_for_not_
     rplan = _plan(room, free_probes=True)
     (rf,) = [j.path[0] for j in rplan.jobs if j.free]
     assert carryable(rplan.edges, room.sources, rplan.open_vertices, [rf]) == {rf}
+
+
+def test_a_sweeps_stopper_is_booked_at_its_vertex_only_while_it_stands_still():
+    """The deployer books a wall sweep's stoppers by the vertex each held standing still
+    (Evidence.stopper_vertices, which 'sweep_blocked' rests on): a robot with a step of a
+    push still to do, or on a vertex such a step fills, is moving and vouches for no
+    place; so is a robot the deployer holds no vertex for."""
+    snap = _snap()
+    spec = next(j for j in _plan(snap).jobs if not j.free)
+    dep, _ = _deployer(snap)
+    dep.jobs = [make_job(spec, snap.occupant)]
+    robots = tuple(sorted(snap.occupant.values())) + (999,)
+    places = dep.pushes._stopper_places(robots)
+    moving = dep.pushes._in_motion(dep.placement.holders(dep.roster))
+    assert moving & set(spec.path)
+    for v, rid in snap.occupant.items():
+        assert places[rid] == (None if v in moving else v)
+    assert places[999] is None
+    assert any(p is not None for p in places.values())

@@ -163,7 +163,7 @@ def test_no_inference_closes_a_gap_a_cut_off_robot_stopped_the_sweeps_at(case, i
     robot of the swarm stands in front of the side; 'sweep_gap': the robot gone, and no
     probe line falls in the gap (0.3, 0.4) left)."""
     from swarmcover.coordinator.jobs import evidence_kwargs
-    cx, ev = _gap_left(by=(42,))
+    cx, ev = _gap_left(by={42: 3})
     snap = _tri_snap(cut=(case == "cut_off"))
     cut_off = {42} if case == "sent_away_cut_off" else set()
     if case.startswith("sent_away"):
@@ -358,19 +358,31 @@ def test_a_gap_probe_that_finds_room_closes_only_as_inferred():
 
 
 @pytest.mark.parametrize("case, probed", [("member", False), ("cut_off", True),
-                                          ("gone", True), ("nobody", True)])
+                                          ("gone", True), ("nobody", True),
+                                          ("replaced", False), ("left", True),
+                                          ("was_moving", True), ("unplaced", True)])
 def test_a_gap_a_robot_of_the_swarm_stopped_the_sweeps_at_is_not_probed(case, probed):
     """Probing every gap placed robots where the sweeps had met one (seed 0: small 25 -> 33
     robots, pillar_hall 122 -> 141): a sweep that stops on a robot of the swarm stopped in
     the space that robot stands in. Such a side closes as the inference 'sweep_blocked'
-    (coordinator.jobs.evidence_kwargs: the stopper is a robot a source reaches now). A
-    stopper cut off from the swarm, or gone, or none, leaves the gap to its probe lines."""
+    (coordinator.jobs.evidence_kwargs: the stopper stood still at a vertex that a robot a
+    source reaches holds now, itself or the one a push put in its place). A stopper cut
+    off from the swarm, or gone, or none, or one whose vertex nobody holds now (it moved
+    on, and nobody took its place), or one that was moving when it stopped the sweep, or
+    whose vertex was not booked (a plain id list), leaves the gap to its probe lines."""
     from swarmcover.coordinator.jobs import evidence_kwargs
-    cx, ev = _wide_gap(() if case == "nobody" else (42,))
+    by = {"nobody": (), "was_moving": {42: None}, "unplaced": (42,)}.get(case, {42: 3})
+    cx, ev = _wide_gap(by)
     snap = _tri_snap(cut=(case == "cut_off"))
     if case == "gone":
         snap = Snapshot(occupant={0: 0, 1: 1, 2: 2}, nbrs={i: _nbrs(TRI, i) for i in range(3)},
                         sources=[0])
+    if case in ("replaced", "left"):
+        # robot 42 was pushed on to vertex 4; robot 43 took its place at vertex 3, or nobody
+        P = np.vstack([TRI, [[S / 2, -0.5]], [[S / 2, 1.5]]])
+        held = {0: 0, 1: 1, 2: 2, 3: 43, 4: 42} if case == "replaced" else {0: 0, 1: 1, 2: 2, 4: 42}
+        nbrs = {i: {j: b for j, b in _nbrs(P, i).items() if j in held} for i in held}
+        snap = Snapshot(occupant=held, nbrs=nbrs, sources=[0])
     kw = evidence_kwargs(ev, snap)
     assert ((0, 1, -1) in kw["sweep_blocked"] or (0, 1, 1) in kw["sweep_blocked"]) == (not probed)
     f = detect_fence(cx, test_drive_failures=ev.failed_directions(), **kw)

@@ -253,7 +253,9 @@ class Evidence:
         # probe key (fraction 0 or 1: the end) -> sweeps driven from that end
         self._swept: dict[SideKey, list[tuple[float, float]]] = {}
         self._sweep_tries: dict[ProbeKey, int] = {}
-        self._sweep_by: dict[SideKey, set[int]] = {}   # side -> robot ids that stopped sweeps
+        # side -> robot id that stopped one of its sweeps -> the vertex it held, standing
+        # still, when it did (None: moving, or not known; :meth:`stopper_vertices`)
+        self._sweep_by: dict[SideKey, dict[int, int | None]] = {}
         self._placed_n: dict[ProbeKey, int] = {}       # sweeps from that end whose robot stayed
         # interior probes a drive went clear at (room found beyond the side) -> the probes
         # that touched there since: no evidence of a wall (:meth:`found_rooms`)
@@ -282,7 +284,9 @@ class Evidence:
         room or an opening is a clear drive (``touched`` False, its robot stays).
         ``placed``: for a clear drive, the vertex its robot stays at as a new robot.
         ``by``: a wall sweep's stoppers, the robot ids seen where a touch stopped it
-        (:meth:`sweep_stoppers`)."""
+        (:meth:`sweep_stoppers`), or a mapping robot id -> the vertex it held, standing
+        still, at the stop (None when it was moving; :meth:`stopper_vertices`). A plain
+        sequence books each robot as standing nowhere known."""
         d = float(dep.bearing if direction is None else direction)
         frac = float(getattr(dep, "via_frac", 0.0) or 0.0)
         edge = tuple(int(x) for x in dep.edge) if dep.edge is not None else None
@@ -294,7 +298,13 @@ class Evidence:
         if float(getattr(dep, "sweep_far", 0.0) or 0.0) > 0.0 and edge is not None:
             self._record_sweep(rec, returned, placed)
             if touched and by:
-                self._sweep_by.setdefault((*edge, rec.sigma), set()).update(int(r) for r in by)
+                held = by if isinstance(by, Mapping) else dict.fromkeys(by)
+                seen = self._sweep_by.setdefault((*edge, rec.sigma), {})
+                for r, v in held.items():
+                    # a robot booked twice stands for the side only if it stood still at the
+                    # same vertex both times
+                    v = None if v is None else int(v)
+                    seen[int(r)] = v if seen.get(int(r), v) == v else None
             return rec
         interior = rec.kind == "probe" and edge is not None and frac > 1e-9
         if touched:
@@ -471,6 +481,22 @@ class Evidence:
         of its wall sweeps (a wall there may have been one of them)."""
         return {k: frozenset(r) for k, r in self._sweep_by.items()
                 if present is None or (k[0] in present and k[1] in present)}
+
+    def stopper_vertices(self, present: Container[int] | None = None
+                         ) -> dict[SideKey, frozenset[int]]:
+        """side (u, v, sigma) -> the vertices robots that stopped one of its wall sweeps
+        held, standing still, when they did (a robot that was moving then, or booked by id
+        alone, gives none). A vertex is a place of the fixed graph: a push that takes its
+        robot on puts the next one there (coordinator.jobs.evidence_kwargs: 'sweep_blocked'
+        counts a side while one of these is held by a robot of the swarm)."""
+        out = {}
+        for k, held in self._sweep_by.items():
+            if present is not None and (k[0] not in present or k[1] not in present):
+                continue
+            at = frozenset(v for v in held.values() if v is not None)
+            if at:
+                out[k] = at
+        return out
 
     def fence_kwargs(self, present: Container[int] | None = None,
                      beyond: Callable[[ProbeKey, int], bool] | None = None) -> dict:
