@@ -697,6 +697,9 @@ class Complex(Message):
     inferred / inferred_why: obstacle edges (indices into the edge list) closed by
       inference rather than by probes, and how ("convex_corner", "forced"); empty by
       default.
+    gap_probed: obstacle edges closed on evidence by the probe lines driven in the gaps
+      their wall sweeps left ('gap_probes'; the others closed on evidence are 'probes'),
+      indices into the edge list; empty by default.
     exceptions: one-sided edges the fence excuses (spec 3.2: the open side lies inside
       the covered lens), indices into the edge list; with frontier and obstacle they are
       every one-sided edge, which run's re-check tests against the world's geometry.
@@ -724,6 +727,7 @@ class Complex(Message):
     inferred: list = f_ints(0, optional=True)
     inferred_why: list = f_strs(maxlen=40, optional=True)
     exceptions: list = f_ints(0, optional=True)
+    gap_probed: list = f_ints(0, optional=True)
     move_s: float = f_float(0.0, 1e6, optional=True)
     enter_s: float = f_float(0.0, 1e6, optional=True)
 
@@ -735,7 +739,7 @@ class Complex(Message):
         if len(self.triangles) % 3:
             raise WireError(self.TAG, "triangles", "length not a multiple of 3")
         m = len(self.edges) // 2
-        for name in ("frontier", "obstacle", "inferred", "exceptions"):
+        for name in ("frontier", "obstacle", "inferred", "exceptions", "gap_probed"):
             bad = [e for e in getattr(self, name) if e >= m]
             if bad:
                 raise WireError(self.TAG, name, f"edge index {bad[0]} >= {m} edges")

@@ -474,6 +474,7 @@ class Deployer:
             inferred=[int(e) for e, _ in getattr(plan, "inferred", ())],
             inferred_why=[str(w) for _, w in getattr(plan, "inferred", ())],
             exceptions=[int(e) for e in getattr(plan, "exceptions", ())],
+            gap_probed=[int(e) for e in getattr(plan, "gap_probed", ())],
             move_s=self.pushes.mean_done_s(StepName.MOVE),
             enter_s=self.pushes.mean_done_s(StepName.ENTER))
 

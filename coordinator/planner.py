@@ -104,6 +104,8 @@ class CyclePlan:
     hole_edges: list[tuple[int, int]] = field(default_factory=list)
     inferred: list[tuple[int, str]] = field(default_factory=list)  # (index into edges, why)
     exceptions: list[int] = field(default_factory=list)  # one-sided edges excused (spec 3.2)
+    # obstacle edges closed on the evidence of their gaps' probe lines ('gap_probes')
+    gap_probed: list[int] = field(default_factory=list)
     redundant: set[int] = field(default_factory=set)
     jobs: list[JobSpec] = field(default_factory=list)
     open_vertices: set[int] = field(default_factory=set)  # vertices with a deployment left
@@ -194,7 +196,8 @@ def plan_cycle(snap: Snapshot, params: TopologyParams, *, cycle: int, redundancy
                      certified=bool(cert.certified) and fence.z.size > 0,
                      hole_edges=[tuple(int(x) for x in e) for e in cert.hole_edge_nodes],
                      inferred=[(int(e), str(w)) for e, w in fence.inferred],
-                     exceptions=[int(e) for e in fence.exceptions])
+                     exceptions=[int(e) for e in fence.exceptions],
+                     gap_probed=[int(e) for e in fence.gap_probed])
     if redundancy and plan.certified:
         prot = set(protected) | set(snap.sources)
         red = find_redundant(cx, fence, cert, protected=prot)

@@ -183,7 +183,8 @@ def fence_audit(cx, positions: dict, walls, rv: float, room_depth: float,
     normal from 9 points along it, and the deepest free run before a segment of ``walls``
     (E, 4) is its depth (capped at 2 rv). A side deeper than ``room_depth`` (m) has room
     behind it: it was closed although free space goes on there, and only the rest of the
-    swarm covers that space. Per reason ('probes' for evidence, else ``inferred_why``):
+    swarm covers that space. Per reason ('probes' for evidence, 'gap_probes' for the
+    evidence of ``gap_probed``, else ``inferred_why``):
     sides, room_behind, and of those how many have the point 0.9 rv into the room along
     the deepest ray (or short of the wall it meets) in ``covered`` (the summary's coverage
     raster, ``raster``'s cells) or not. ``examples`` lists up to 20 room-behind sides."""
@@ -192,8 +193,9 @@ def fence_audit(cx, positions: dict, walls, rv: float, room_depth: float,
     P = np.array([positions.get(o, (math.nan, math.nan)) for o in cx.occupants],
                  float).reshape(-1, 2)
     E = np.asarray(cx.edges, np.int64).reshape(-1, 2)
-    why = {int(k): str(w) for k, w in zip(getattr(cx, "inferred", None) or (),
-                                          getattr(cx, "inferred_why", None) or ())}
+    why = {int(k): "gap_probes" for k in getattr(cx, "gap_probed", None) or ()}
+    why.update({int(k): str(w) for k, w in zip(getattr(cx, "inferred", None) or (),
+                                               getattr(cx, "inferred_why", None) or ())})
     try:
         tl = [[loc[int(x)] for x in t]
               for t in np.asarray(cx.triangles, np.int64).reshape(-1, 3).tolist()]

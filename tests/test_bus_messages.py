@@ -78,6 +78,7 @@ def messages(draw, cls):
         vals["obstacle"] = [e % m for e in vals["obstacle"]] if m else []
         vals["inferred"] = [e % m for e in vals["inferred"]] if m else []
         vals["exceptions"] = [e % m for e in vals["exceptions"]] if m else []
+        vals["gap_probed"] = [e % m for e in vals["gap_probed"]] if m else []
         vals["inferred_why"] = vals["inferred_why"][: len(vals["inferred"])]
     return cls(**vals)
 

@@ -373,6 +373,11 @@ def test_fence_audit_says_how_deep_the_free_space_runs_behind_each_closed_side()
     none = fence_audit(cx, pos, wm.walls, 1.0, 0.75, np.zeros_like(covered), raster)
     assert none["by_why"]["probe_clear"]["room_uncovered"] == 1
     assert none["by_why"]["probes"]["room_uncovered"] == 2
+    # a side closed on its gaps' probe lines is evidence too, counted under its own name
+    cx.gap_probed = [0]
+    gp = fence_audit(cx, pos, wm.walls, 1.0, 0.75, covered, raster)["by_why"]
+    assert set(gp) == {"probes", "gap_probes", "probe_clear"}
+    assert gp["gap_probes"]["sides"] == 1 and gp["probes"]["sides"] == 2
     # both triangles' apexes on one side is what makes a side open: a lone edge has none
     lone = Complex(vertices=[0, 1], occupants=[10, 11], edges=[0, 1], triangles=[],
                    obstacle=[0], certified=True, state="certified")

@@ -314,6 +314,7 @@ def test_a_touch_that_could_not_sweep_counts_a_try_but_joins_nothing():
     e, side = _side(f, cx)
     assert driven == [0.25, 0.5, 0.75]
     assert side.reason == "gap_probes" and e in f.obstacle.tolist() and not f.inferred
+    assert f.gap_probed == (e,)
 
 
 def _wide_gap(by=()):

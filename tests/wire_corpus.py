@@ -89,7 +89,7 @@ def random_message(rng: random.Random, cls):
         vals["edges"] = vals["edges"][: len(vals["edges"]) // 2 * 2]
         vals["triangles"] = vals["triangles"][: len(vals["triangles"]) // 3 * 3]
         k = len(vals["edges"]) // 2
-        for name in ("frontier", "obstacle", "inferred", "exceptions"):
+        for name in ("frontier", "obstacle", "inferred", "exceptions", "gap_probed"):
             vals[name] = [e % k for e in vals[name]] if k else []
         vals["inferred_why"] = (vals["inferred_why"] + ["forced"] * 9)[: len(vals["inferred"])]
     return cls(**vals)

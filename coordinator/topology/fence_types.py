@@ -157,3 +157,11 @@ class Fence:
     def done(self) -> bool:
         """True when there is no frontier left (K empty and no deploying robot)."""
         return not self.deployments
+
+    @property
+    def gap_probed(self) -> tuple[int, ...]:
+        """Edge ids of the obstacle edges closed on the evidence of the probe lines driven
+        in the gaps their sweeps left ('gap_probes'), by edge id: the Complex message's
+        ``gap_probed``, so that an audit tells them from 'probes'."""
+        return tuple(fe.index for fe in self.edges
+                     if any(s.kind == "obstacle" and s.reason == "gap_probes" for s in fe.sides))
