@@ -32,7 +32,11 @@ from swarmcover.bus.messages import ALL_MESSAGES, WireError, decode  # noqa: E40
 # (24 cycles) and its guard skipped the certification check
 RUN_BOUND_S = 240.0
 RUN_CONFIG = "configs/tiny.toml"
-LOSSY_BOUND_S = 45.0
+# the everyday lossy run stops at its wall bound (progress, a clean end); the slow one
+# certifies (tiny at 1% proxy loss: minutes in lockstep, docs/lab-network.md)
+LOSSY_BOUND_S = 15.0
+LOSSY_CERTIFY_S = 900.0
+NETNS_BOUND_S = 45.0       # real 2% loss each way (root only): its old bound
 PER_TOPIC = 10_000
 
 
@@ -180,13 +184,12 @@ def _guard(r: dict, what: str) -> None:
 
 
 def _progressed_and_certified(r: dict, over: str, fault: str) -> None:
-    """A run over lossy links must progress; certifying within LOSSY_BOUND_S is guarded (a
+    """A run over lossy links must progress; certifying within its bound is guarded (a
     skip that says how far it got), and a certified run must end with 0."""
     assert r.get("sim_time_s", 0) > 0, f"the world made no progress over {over}"
     if not r["certified"]:
-        pytest.skip(f"{fault}: reached cycle {r.get('cycles')} in "
-                    f"{LOSSY_BOUND_S:.0f} s without certifying yet (lockstep stalls the "
-                    f"whole swarm on every lost segment; see bench/faults.py)")
+        pytest.skip(f"{fault}: reached cycle {r.get('cycles')} in {r['wall_s']:.0f} s "
+                    f"without certifying yet (see bench/faults.py)")
     assert r["rc"] == 0
 
 
@@ -213,15 +216,30 @@ def test_a_router_restarted_mid_run_the_processes_reconnect(tmp_path):
     assert r["rc"] == 0
 
 
+def test_a_run_over_lossy_delayed_links_progresses_and_ends_on_its_bound(tmp_path):
+    """1% loss, 5 ms delay on every process's link. In lockstep every lost segment stalls a
+    tick for the whole swarm (the proxy models a TCP retransmission stall), so tiny needs
+    several minutes to certify this way (docs/lab-network.md): the everyday suite asserts
+    that the world ticks on over the lossy links and the run ends on its wall bound with
+    the reason and a summary (nothing hangs); the slow test below certifies."""
+    r = lossy_run(tmp_path, loss=0.01, delay_s=0.005, jitter_s=0.002, wall_timeout=LOSSY_BOUND_S,
+                  config=RUN_CONFIG)
+    assert r["link"]["lost"] > 0 and r["link"]["connections"] >= 4
+    assert r.get("sim_time_s", 0) > 0, "the world made no progress over the lossy links"
+    if r["certified"]:
+        assert r["rc"] == 0
+    else:
+        assert r["rc"] == 1 and r["stop_reason"] == "wall_timeout", r
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(LOSSY_CERTIFY_S + 120)
 def test_a_run_over_lossy_delayed_links_still_certifies(tmp_path):
     if _VERDICT.get("certified") is False:
         pytest.skip("an earlier full run of this module did not certify within the bound: "
                     "the coordinator is still being tuned")
-    # in lockstep every lost segment stalls a tick for the whole swarm (the proxy models a
-    # TCP retransmission stall): the run progresses but slowly; bench/faults.py sweeps loss
-    # up to where it stops certifying. Here: progress is asserted, certification is guarded.
-    r = lossy_run(tmp_path, loss=0.01, delay_s=0.005, jitter_s=0.002, wall_timeout=LOSSY_BOUND_S,
-                  config=RUN_CONFIG)
+    r = lossy_run(tmp_path, loss=0.01, delay_s=0.005, jitter_s=0.002,
+                  wall_timeout=LOSSY_CERTIFY_S, config=RUN_CONFIG)
     assert r["link"]["lost"] > 0 and r["link"]["connections"] >= 4
     _progressed_and_certified(r, "the lossy links", "1% loss, 5 ms delay")
 
@@ -238,7 +256,7 @@ def test_a_run_with_real_packet_loss_between_namespaces_still_certifies(tmp_path
         pytest.skip("an earlier full run of this module did not certify within the bound: "
                     "the coordinator is still being tuned")
     try:
-        r = netns_loss_run(tmp_path, 0.02, wall_timeout=LOSSY_BOUND_S, config=RUN_CONFIG)
+        r = netns_loss_run(tmp_path, 0.02, wall_timeout=NETNS_BOUND_S, config=RUN_CONFIG)
     except OSError as e:
         pytest.skip(f"cannot build namespaces with packet loss here: {e}")
     _progressed_and_certified(r, "the lossy link", "2% real packet loss")
