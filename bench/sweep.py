@@ -168,7 +168,10 @@ class Sweeper:
         pi/2 - pi/N of d, or whose body it would overlap: the agent stops when a robot's
         touch sector blocks its way (it knows Q by its bearing, and only when no other robot
         is there too); robots do not overlap."""
-        k = self.robots_ahead(R, d)
+        return self._blocker(self.robots_ahead(R, d))
+
+    def _blocker(self, k: np.ndarray) -> str:
+        """'' / 'Q' / 'robot' for the blocking robots ``k`` (:meth:`robots_ahead`)."""
         if not len(k):
             return ""
         if len(k) == 1 and np.linalg.norm(self.others[k[0]] - self.Q) < 1e-9:
@@ -241,11 +244,13 @@ class Sweeper:
                     return SweepResult("room", R, hi, lo, False, total)
                 t = _unit(n - h * math.pi / 2.0)
                 d = math.cos(PRESS) * t + math.sin(PRESS) * _unit(n)
-                block = "budget" if travelled >= self.budget else self.robot_ahead(R, d)
+                over = travelled >= self.budget
+                ahead = np.zeros(0, np.int64) if over else self.robots_ahead(R, d)
+                block = "budget" if over else self._blocker(ahead)
                 if block:
                     why.append(f"{phase}:{block}")
                     if block == "robot":
-                        self._by.update(int(x) for x in self.robots_ahead(R, d))
+                        self._by.update(int(x) for x in ahead)
                     if phase == 1:
                         if block == "Q":
                             # the other end's body: it rests where the wall goes on
