@@ -317,10 +317,11 @@ def test_a_touch_that_could_not_sweep_counts_a_try_but_joins_nothing():
     assert f.gap_probed == (e,)
 
 
-def _wide_gap(by=()):
+def _wide_gap(by=(), later=None):
     """Both ends' sweeps over, u's joined (-inf, 0.2], v's [0.55, +inf): the gap (0.2,
     0.55) holds the probe lines at 0.25 and 0.5. ``by``: the robots seen where a touch
-    stopped u's sweeps."""
+    stopped u's first sweep, and its later ones unless ``later`` says otherwise."""
+    later = by if later is None else later
     cx, ev = _candidate()
     a, b = _sweeps(detect_fence(cx, **ev.fence_kwargs()))
     ev.record(b, touched=True, swept=(0.45, -INF))        # v covers [0.55, +inf)
@@ -328,7 +329,7 @@ def _wide_gap(by=()):
     for _ in range(TopologyParams().sweep_tries - 1):
         for d in _sweeps(detect_fence(cx, **ev.fence_kwargs())):
             ev.record(d, touched=True, swept=(0.2, -INF) if d.vertex == 0 else (0.45, -INF),
-                      by=by if d.vertex == 0 else ())
+                      by=later if d.vertex == 0 else ())
     assert not _sweeps(detect_fence(cx, **ev.fence_kwargs()))
     return cx, ev
 
@@ -361,7 +362,11 @@ def test_a_gap_probe_that_finds_room_closes_only_as_inferred():
 @pytest.mark.parametrize("case, probed", [("member", False), ("cut_off", True),
                                           ("gone", True), ("nobody", True),
                                           ("replaced", False), ("left", True),
-                                          ("was_moving", True), ("unplaced", True)])
+                                          ("was_moving", True), ("unplaced", True),
+                                          ("two_held", False), ("one_of_two_left", False),
+                                          ("one_of_two_moving", False),
+                                          ("moved_between_stops", True),
+                                          ("moved_between_stops_left", True)])
 def test_a_gap_a_robot_of_the_swarm_stopped_the_sweeps_at_is_not_probed(case, probed):
     """Probing every gap placed robots where the sweeps had met one (seed 0: small 25 -> 33
     robots, pillar_hall 122 -> 141): a sweep that stops on a robot of the swarm stopped in
@@ -370,18 +375,34 @@ def test_a_gap_a_robot_of_the_swarm_stopped_the_sweeps_at_is_not_probed(case, pr
     source reaches holds now, itself or the one a push put in its place). A stopper cut
     off from the swarm, or gone, or none, or one whose vertex nobody holds now (it moved
     on, and nobody took its place), or one that was moving when it stopped the sweep, or
-    whose vertex was not booked (a plain id list), leaves the gap to its probe lines."""
+    whose vertex was not booked (a plain id list), leaves the gap to its probe lines.
+    Of several stoppers (robots 42 and 43 at vertices 3 and 4) one place held is enough;
+    a robot booked at two places (42 at vertex 3 for the first sweep, pushed on to 4 for
+    the later ones) vouches for neither. Asking every stop's place to be held instead was
+    measured and left out (README, "A stopper vouches for a gap only from a place it
+    stood still at")."""
     from swarmcover.coordinator.jobs import evidence_kwargs
-    by = {"nobody": (), "was_moving": {42: None}, "unplaced": (42,)}.get(case, {42: 3})
-    cx, ev = _wide_gap(by)
+    by = {"nobody": (), "was_moving": {42: None}, "unplaced": (42,),
+          "two_held": {42: 3, 43: 4}, "one_of_two_left": {42: 3, 43: 4},
+          "one_of_two_moving": {42: 3, 43: None}}.get(case, {42: 3})
+    later = {42: 4} if case.startswith("moved_between") else None
+    cx, ev = _wide_gap(by, later)
     snap = _tri_snap(cut=(case == "cut_off"))
     if case == "gone":
         snap = Snapshot(occupant={0: 0, 1: 1, 2: 2}, nbrs={i: _nbrs(TRI, i) for i in range(3)},
                         sources=[0])
-    if case in ("replaced", "left"):
-        # robot 42 was pushed on to vertex 4; robot 43 took its place at vertex 3, or nobody
+    if case in ("replaced", "left", "two_held", "one_of_two_left", "one_of_two_moving",
+                "moved_between_stops", "moved_between_stops_left"):
+        # robot 42 was pushed on to vertex 4; robot 43 took its place at vertex 3, or
+        # nobody ("left"); robots 42 and 43 at vertices 3 and 4, or 43 gone
         P = np.vstack([TRI, [[S / 2, -0.5]], [[S / 2, 1.5]]])
-        held = {0: 0, 1: 1, 2: 2, 3: 43, 4: 42} if case == "replaced" else {0: 0, 1: 1, 2: 2, 4: 42}
+        held = {0: 0, 1: 1, 2: 2, 3: 43, 4: 42}
+        if case in ("two_held", "one_of_two_moving"):
+            held = {0: 0, 1: 1, 2: 2, 3: 42, 4: 43}
+        if case in ("left", "moved_between_stops_left"):
+            held = {0: 0, 1: 1, 2: 2, 4: 42}
+        if case == "one_of_two_left":
+            held = {0: 0, 1: 1, 2: 2, 3: 42}
         nbrs = {i: {j: b for j, b in _nbrs(P, i).items() if j in held} for i in held}
         snap = Snapshot(occupant=held, nbrs=nbrs, sources=[0])
     kw = evidence_kwargs(ev, snap)
