@@ -345,25 +345,33 @@ def test_probe_via_bearings_follow_from_the_triangle():
     assert want == {1: pytest.approx(0.3)}
 
 
-def test_a_lone_robot_tries_six_directions_before_it_gives_up():
+def test_a_lone_robot_tries_twelve_directions_before_it_gives_up():
+    """Six 60 deg apart from its default bearing; once all six touched (each blocks 30 deg
+    either side: the whole circle), the six between them (bench/truth.py seed 2 map 387:
+    the first robot 0.3-0.6 m from a wall and boxes in each of its six directions ended
+    the run alone at 15% coverage, though a direction between them was clear for 2 m)."""
     cx = build_complex({0: {"neighbours": {}}})
     ev = Evidence()
-    for touches in range(7):
+    driven = []
+    for touches in range(13):
         f = detect_fence(cx, PROBES, default_bearing=0.3, **ev.fence_kwargs())
         deps = f.deployments.get(0, ())
-        if touches < 6:
+        if touches < 12:
             assert deps and {d.kind for d in deps} == {"isolated"}, touches
-            assert len(deps) == 6 - touches
+            assert len(deps) == (6 - touches if touches < 6 else 12 - touches)
             if touches == 0:
                 assert deps[0].bearing == pytest.approx(0.3)
+            driven.append(deps[0].bearing)
             ev.record(deps[0], touched=True)
         else:
             assert not deps and f.done and f.z.size == 0
+    want = sorted(wrap(0.3 + k * math.pi / 6) for k in range(12))
+    assert sorted(driven) == pytest.approx(want)
 
 
 def test_an_empty_target_never_certifies():
     snap = Snapshot(occupant={0: 0}, nbrs={0: {}}, sources=[0], source_dirs=[0.3])
-    fails = {0: [wrap(0.3 + k * math.pi / 3) for k in range(6)]}
+    fails = {0: [wrap(0.3 + k * math.pi / 6) for k in range(12)]}   # every direction offered
     kw = dict(cycle=3, redundancy=True, previous_redundant=set(), protected=set(), max_paths=4,
               scale_correct=False, test_drive=True, next_vertex=1)
     plan = plan_cycle(snap, TopologyParams(d_td=0.9), test_drive_failures={0: fails[0][:1]}, **kw)
