@@ -348,8 +348,8 @@ def test_probe_via_bearings_follow_from_the_triangle():
 def test_a_lone_robot_tries_twelve_directions_before_it_gives_up():
     """Six 60 deg apart from its default bearing; once all six touched (each blocks 30 deg
     either side: the whole circle), the six between them (bench/truth.py seed 2 map 387:
-    the first robot 0.3-0.6 m from a wall and boxes in each of its six directions ended
-    the run alone at 15% coverage, though a direction between them was clear for 2 m)."""
+    the first robot, whose six drives all touched within d0, ended the run alone at 15%
+    coverage)."""
     cx = build_complex({0: {"neighbours": {}}})
     ev = Evidence()
     driven = []

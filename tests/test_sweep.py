@@ -391,18 +391,15 @@ def test_a_gap_a_robot_of_the_swarm_stopped_the_sweeps_at_is_not_probed(case, pr
     if case == "gone":
         snap = Snapshot(occupant={0: 0, 1: 1, 2: 2}, nbrs={i: _nbrs(TRI, i) for i in range(3)},
                         sources=[0])
-    if case in ("replaced", "left", "two_held", "one_of_two_left", "one_of_two_moving",
-                "moved_between_stops", "moved_between_stops_left"):
-        # robot 42 was pushed on to vertex 4; robot 43 took its place at vertex 3, or
-        # nobody ("left"); robots 42 and 43 at vertices 3 and 4, or 43 gone
+    # who holds vertices 3 and 4 beyond the side: robot 42 pushed on to 4 and robot 43 in
+    # its place at 3, or nobody there ("left"); robots 42 and 43 at 3 and 4, or 43 gone
+    beyond = {"replaced": {3: 43, 4: 42}, "moved_between_stops": {3: 43, 4: 42},
+              "left": {4: 42}, "moved_between_stops_left": {4: 42},
+              "two_held": {3: 42, 4: 43}, "one_of_two_moving": {3: 42, 4: 43},
+              "one_of_two_left": {3: 42}}.get(case)
+    if beyond is not None:
         P = np.vstack([TRI, [[S / 2, -0.5]], [[S / 2, 1.5]]])
-        held = {0: 0, 1: 1, 2: 2, 3: 43, 4: 42}
-        if case in ("two_held", "one_of_two_moving"):
-            held = {0: 0, 1: 1, 2: 2, 3: 42, 4: 43}
-        if case in ("left", "moved_between_stops_left"):
-            held = {0: 0, 1: 1, 2: 2, 4: 42}
-        if case == "one_of_two_left":
-            held = {0: 0, 1: 1, 2: 2, 3: 42}
+        held = {0: 0, 1: 1, 2: 2, **beyond}
         nbrs = {i: {j: b for j, b in _nbrs(P, i).items() if j in held} for i in held}
         snap = Snapshot(occupant=held, nbrs=nbrs, sources=[0])
     kw = evidence_kwargs(ev, snap)

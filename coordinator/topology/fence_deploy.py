@@ -144,15 +144,13 @@ def robot_deployments(cx: Complex, L: _Local, room: Room, deps: Deps,
             else:
                 del deps[p]
     # a robot with no neighbour whose six drives all touched (each blocks 30 deg either
-    # side, so together the whole circle) tries the six directions between them, each but
-    # where a drive of its own went: the first robot, 0.3-0.6 m from a wall and boxes in
-    # every one of its six directions, ended the run with one robot at 15% coverage
-    # (bench/truth.py seed 2 map 387; east was clear for 2 m)
+    # side, so together the whole circle) tries the six directions between them, but where
+    # a drive of its own went: the first robot, whose six drives all touched within d0,
+    # ended the run alone at 15% coverage (bench/truth.py seed 2 map 387)
     for p in np.nonzero(cx.degree == 0)[0].tolist():
         if p not in deps:
-            tried = room.failed.get(p, ())
             deps[p] = [dp for dp in _isolated(int(ids[p]), default_bearing, _PI3 / 2.0)
-                       if not any(abs(wrap(dp.bearing - phi)) < _PI3 / 4.0 for phi in tried)]
+                       if not room.blocked(p, dp.bearing, cone=_PI3 / 4.0)]
             if not deps[p]:
                 del deps[p]
 

@@ -162,9 +162,9 @@ class Room:
             self._touch[p] = _touch_ok(self.cx, self.L, p, self.tau)
         return self._touch[p]
 
-    def blocked(self, p: int, d: float) -> bool:
-        """A failed test drive of p lies within _FAILED_CONE of direction d."""
-        return any(abs(wrap(d - phi)) < _FAILED_CONE for phi in self.failed.get(p, ()))
+    def blocked(self, p: int, d: float, cone: float = _FAILED_CONE) -> bool:
+        """A failed test drive of p lies within ``cone`` (rad; _FAILED_CONE) of direction d."""
+        return any(abs(wrap(d - phi)) < cone for phi in self.failed.get(p, ()))
 
     def deep(self, p: int, q: int, off):
         """The second probe of p on the side of edge p-q deploying at ``off``, or None. A
