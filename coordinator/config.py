@@ -13,6 +13,10 @@ from swarmcover.bus.configcheck import ConfigError, check_fields
 
 from .topology.params import TopologyParams
 
+# The topology core's defaults, resolved (eps = 0.1 rv): the fields the two share take
+# theirs from here, so a default changed in the core is the run's default too.
+_CORE = TopologyParams()
+
 
 class PushMode(StrEnum):
     """How the movers along a push's path go (``push_mode``; equal to its TOML string)."""
@@ -24,11 +28,11 @@ class PushMode(StrEnum):
 class CoordinatorConfig:
     """Deployment-cycle settings (spec sections 1.8, 4 and 5)."""
 
-    rv: float = 1.0
-    eps_rv: float = 0.1            # separation margin as a fraction of rv (d0 = rv - eps)
-    beta_deg: float = 2.0          # bearing-noise bound
-    n_touch: int = 8
-    w_obstacle: float = 3.0        # path cost of an obstacle edge
+    rv: float = _CORE.rv
+    eps_rv: float = _CORE.eps / _CORE.rv  # separation margin as a fraction of rv (d0 = rv - eps)
+    beta_deg: float = math.degrees(_CORE.beta)  # bearing-noise bound
+    n_touch: int = _CORE.n_touch
+    w_obstacle: float = _CORE.w_obstacle  # path cost of an obstacle edge
     test_drive: bool = True        # spec 3.4(iv)
     d_td_rv: float = 0.9           # test-drive distance as a fraction of rv. The spec's [P]
                                    # 0.25 missed walls between 0.25 and 0.9 rv: the new robot
@@ -59,9 +63,10 @@ class CoordinatorConfig:
                                    # geometry inherits the parent edge's length, so spacing
                                    # shrank cycle after cycle: 6 m x 4 m room, seeds 0-3,
                                    # mean: 57.8 -> 51.2 robots
-    redundancy_period: int = 10    # T_H: cycles between redundancy passes. Every config
-                                   # seeds 0-2 against 10: at 3, +2.3% robots, +3.1% time;
-                                   # at 30, +1.9% robots, +2.8% time
+    redundancy_period: int = _CORE.redundancy_period  # T_H: cycles between redundancy
+                                   # passes. Every config seeds 0-2 against 10: at 3,
+                                   # +2.3% robots, +3.1% time; at 30, +1.9% robots, +2.8%
+                                   # time
     scale_correct_period: int = 5  # run scale correction on a new frontier robot every N cycles
     push_mode: str = "parallel"    # "parallel": movers along a path go at once where >= 2 static
                                    # landmarks exist; "sequential": strictly from the front
@@ -90,7 +95,7 @@ class CoordinatorConfig:
                                    # whose touch sector is not its line's own, or whose side's
                                    # end rests on a wall that oblique, is driven again along
                                    # that wall's normal: 0.52 rv doors at any wall angle
-    sweep: bool = True             # a fence side its ends would close (no room at either end)
+    sweep: bool = _CORE.sweep      # a fence side its ends would close (no room at either end)
                                    # closes once both ends swept the wall in front of it: each
                                    # drives into its wall and slides along it, pressing into
                                    # it, past the edge's middle and back past its own end to
@@ -100,19 +105,19 @@ class CoordinatorConfig:
                                    # wall at least 2 x radius + 0.06 m wide is found (0.18 m
                                    # with the default body and [agent] sweep_*), whatever its
                                    # width in rv. false: door_min_rv's probe lines
-    sweep_lenses: bool = True      # a sweep's wall may also recede into the lens of a
+    sweep_lenses: bool = _CORE.sweep_lenses  # a sweep's wall may also recede into the lens of a
                                    # segment from its vertex to another robot round it
                                    # before it is room, and its first drive goes on while in
                                    # them (up to d0): fewer wall robots
                                    # (coordinator.topology.params). false: the edge's lens
                                    # alone (the rule until 2026-12-03)
-    gap_probes: bool = True        # a side whose sweeps left a gap and found no room,
+    gap_probes: bool = _CORE.gap_probes  # a side whose sweeps left a gap and found no room,
                                    # none stopped by a robot of the swarm, drives the probe
                                    # lines in the gap and closes on their touches
                                    # (evidence, 'gap_probes'), not as the inference
                                    # 'sweep_gap' (coordinator.topology.params). false: the
                                    # rule until 2026-12-03
-    sweep_fallbacks: bool = False  # a push whose deployment finds no free lattice point,
+    sweep_fallbacks: bool = _CORE.sweep_fallbacks  # a push whose deployment finds no free lattice point,
                                    # from a robot resting on a wall, sweeps its side first
                                    # instead; the side closes only on the sweeps' evidence
                                    # (coordinator.topology.params). false: deployed at the

@@ -145,3 +145,14 @@ def test_completed_resolved_toml_holds_every_hwbridge_value_of_a_mixed_run():
     world = dataclasses.replace(loads_config(full, str(src), str(src.parent)), sections={})
     assert world == dataclasses.replace(cfg, sections={})
     assert "hwbridge" in check_text(full)
+
+
+def test_the_run_defaults_are_the_topology_cores_but_the_test_drive():
+    """One copy of the algorithm's defaults: CoordinatorConfig() hands the topology core
+    exactly TopologyParams()'s values, except the test-drive distance (d_td_rv 0.9 against
+    the spec's 0.25, a departure the field's comment argues)."""
+    from swarmcover.coordinator.config import CoordinatorConfig
+    from swarmcover.coordinator.topology.params import TopologyParams
+    run, core = CoordinatorConfig().topology(), TopologyParams()
+    assert dataclasses.replace(run, d_td=core.d_td) == core
+    assert run.d_td == pytest.approx(0.9) and core.d_td == pytest.approx(0.25)
