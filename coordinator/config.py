@@ -122,6 +122,12 @@ class CoordinatorConfig:
                                    # instead; the side closes only on the sweeps' evidence
                                    # (coordinator.topology.params). false: deployed at the
                                    # spec's direction (the rule until 2026-12-03)
+    corner_wait: bool = _CORE.corner_wait  # a side the occlusion rule would close from
+                                   # one end ('convex_corner') while its other end's open
+                                   # wedge there is reflex (a robot in a doorway) closes
+                                   # only once that end drove into it and found no room
+                                   # (coordinator.topology.params). false: at once (the
+                                   # rule until 2026-12-04)
     free_probes: bool = True       # frontier robots off every push probe their sides in the
                                    # same cycle without a path, and come back home whatever
                                    # they found (a clear one is no evidence; a push takes that
@@ -198,7 +204,8 @@ class CoordinatorConfig:
                               w_obstacle=self.w_obstacle, d_td=self.d_td_rv * self.rv,
                               redundancy_period=self.redundancy_period, sweep=self.sweep,
                               sweep_lenses=self.sweep_lenses, gap_probes=self.gap_probes,
-                              sweep_fallbacks=self.sweep_fallbacks)
+                              sweep_fallbacks=self.sweep_fallbacks,
+                              corner_wait=self.corner_wait)
 
     @classmethod
     def from_section(cls, section: dict | None, rv: float, where: str = "config") -> "CoordinatorConfig":

@@ -199,7 +199,8 @@ def test_convex_corner_at_a_tip_waits_for_the_tips_own_drives():
     open wedge is reflex and leads into the next room. The side stays frontier, deployed
     from 1 (not from 0, into the thin wedge), and closes as 'convex_corner' only once 1's
     drives there (its 60 deg one and its reflex second probe) touched
-    (TopologyParams.corner_wait; off by default, when the side closes at once)."""
+    (TopologyParams.corner_wait, the default since 2026-12-04; off, the side closes at
+    once)."""
     P = TopologyParams(corner_wait=True)
     cx, f = _corner(50, tips=False, corner_wait=True)
     es = {int(cx.edge_index(0, 1)): 1, int(cx.edge_index(0, 2)): 2}
@@ -221,7 +222,8 @@ def test_convex_corner_at_a_tip_waits_for_the_tips_own_drives():
     f2 = _probed(cx, P, test_drive_failures=fails)
     for e in es:
         assert f2.by_index[e].sides[0].reason == "convex_corner" and e in f2.obstacle.tolist()
-    f3 = _corner(50, tips=False)[1]                      # the default closes them at once
+    assert TopologyParams().corner_wait                  # the default waits ...
+    f3 = _corner(50, tips=False, corner_wait=False)[1]   # ... off, they close at once
     assert all(f3.by_index[e].sides[0].reason == "convex_corner" for e in es)
 
 

@@ -266,3 +266,23 @@ def test_rooms_are_booked_as_the_deployer_books_them():
     assert held["end"] == "fixed" and not held["false_certificate"] and held["coverage"] > 0.995
     legacy = truth.run_map(case, hold_rooms=False)
     assert legacy["false_certificate"] and legacy["coverage"] < 0.6
+
+
+def test_a_robot_in_a_doorway_keeps_its_side_open_until_it_drove():
+    """bench/truth.py seed 3 map 399 (two rooms, a 0.44 rv door, the source facing a wall,
+    0.5 deg noise): a robot stood in the doorway, and the side from it back to the first
+    room's robot was closed by the occlusion rule ('convex_corner': the near end's next
+    robot was hidden from it by the jamb) while the doorway robot's open wedge on that
+    side was reflex. The room behind, 4.5 m^2, was certified uncovered (58.8% coverage).
+    With ``corner_wait`` (the default since 2026-12-04) the doorway robot drives into its
+    wedge first, and the side closes only once it has no room."""
+    from swarmcover.coordinator import TopologyParams
+
+    assert TopologyParams().corner_wait
+    case = truth.make_map(3, 399)
+    assert case.kind == "two_rooms" and 0.4 * RV <= case.door_w < 0.45 * RV
+    row = truth.run_map(case)
+    assert row["end"] == "fixed" and not row["false_certificate"] and row["coverage"] > 0.995
+    old = truth.run_map(case, topology={"corner_wait": False})
+    assert old["false_certificate"] and old["coverage"] < 0.6
+    assert "convex_corner" in [h["reason"] for h in old["hid_by"]]

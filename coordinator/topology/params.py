@@ -32,11 +32,13 @@ class TopologyParams:
       deployment left (False: the run cannot certify).
     corner_wait: a convex corner seen from one end only, whose other end has a reflex open
       wedge on that side (a robot in a doorway), closes only once that end's own drives
-      there touched (True), or at once (False). Off by default: it removed bench/truth.py
-      map 70's false certificate (a 0.30 rv door, below door_min_rv), and no false
-      certificate on doors >= door_min_rv needs it over 500 maps, while corridor_doors
-      (seed 0, in-process) took 94 robots / 150 cycles / 2,789 s with it against 75 / 85 /
-      1,785 s without.
+      there touched (True), or at once (False). On by default since 2026-12-04: off,
+      bench/truth.py seed 3 map 399 certified the room behind a 0.44 rv door uncovered
+      (58.8% coverage; the side from the doorway robot back into the first room closed as
+      'convex_corner'), a door the guarantee covers. Before, off: it removed map 70's false
+      certificate (a 0.30 rv door), and corridor_doors (seed 0, in-process, before wall
+      sweeps) took 94 robots / 150 cycles with it against 75 / 85 without; with today's
+      rules that run is the same both ways (README, "A robot in a doorway").
     tilt_min: a probe that touched with its touch sector's centre more than this (rad) off
       the direction driven is driven again along that centre, near the wall's normal, and
       so is each probe of a side whose end rests on a wall that far off
@@ -93,7 +95,7 @@ class TopologyParams:
     redundancy_period: int = 10
     corner_probes: bool = False
     clear_infers: bool = True
-    corner_wait: bool = False
+    corner_wait: bool = True
     tilt_min: float | None = None
     sweep: bool = True
     sweep_overlap: float = 0.1
