@@ -398,8 +398,12 @@ def test_a_single_file_end_tries_every_direction_of_its_open_wedge():
     # the dangling edge's 60-deg drives and probes first, then single file: 180 (away from
     # the neighbour) and 120 deg either side; 60 deg either side went with the edge drives
     assert "single_file" in kinds
-    sf = sorted(a for k, a in seen if k == "single_file")
-    assert sf == [120, 120, 180]
+    sf = [a for k, a in seen if k == "single_file"]
+    assert sorted(sf[:3]) == [120, 120, 180]
+    # once those touched, the directions between them (bench/truth.py seed 4 map 188: a
+    # robot in a 0.30 rv doorway): 150 and 90 deg either side; 30 deg either side is
+    # within 50 deg of the neighbour, and none lies within 15 deg of a drive of its own
+    assert sorted(sf[3:]) == [90, 90, 150, 150]
     assert not detect_fence(cx, PROBES, **ev.fence_kwargs()).deployments.get(0)
 
 

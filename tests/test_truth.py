@@ -288,8 +288,6 @@ def test_a_robot_in_a_doorway_keeps_its_side_open_until_it_drove():
     assert "convex_corner" in [h["reason"] for h in old["hid_by"]]
 
 
-@pytest.mark.xfail(strict=True, reason="known limit (2026-12-04): a robot standing in a "
-                   "0.30 rv door, below door_min_rv, whose drives all touched the jambs")
 def test_a_robot_in_a_narrow_door_whose_drives_all_touched_the_jambs():
     """bench/truth.py seed 4 map 188 (two rooms, a 0.30 rv door, below door_min_rv): an
     opening found by a sweep put robot 20 in the doorway; it and the robot one of its
@@ -297,9 +295,11 @@ def test_a_robot_in_a_narrow_door_whose_drives_all_touched_the_jambs():
     (each then excluding 30 deg either side of it; the nearest 23 and 36 deg off the
     way through the door) touched the jambs, the edge's sides closed as 'probes' and
     'convex_corner', and the room behind,
-    5.1 m^2, was certified uncovered (54.6%), with corner_wait on or off. Strict: this
-    fails, and must be turned into a plain test, once the case is fixed."""
+    5.1 m^2, was certified uncovered (54.6%), with corner_wait on or off. A chain end
+    whose single-file drives all touched now tries the directions between them, as a lone
+    robot does (coordinator.topology.fence_deploy.robot_deployments)."""
     case = truth.make_map(4, 188)
     assert case.kind == "two_rooms" and case.door_w < 0.4 * RV
     row = truth.run_map(case)
     assert row["end"] == "fixed" and not row["false_certificate"], (row["coverage"],)
+    assert row["coverage"] > 0.995

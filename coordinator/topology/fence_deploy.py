@@ -84,18 +84,19 @@ def resolve_sides(cx: Complex, L: _Local, open_sides: Sides, marks: Marks,
     return fence_edges, K, O, z, deps
 
 
-def _single_file(L: _Local, p: int, nid: int) -> list[Deployment]:
+def _single_file(L: _Local, p: int, nid: int, offset: float = 0.0) -> list[Deployment]:
     """Directions of single-file robot p (node id nid): away from the circular mean of the
     neighbours, then 60 and 120 deg either side at least _SINGLE_CLEAR from every
-    neighbour; none inside a chain (resultant < 0.5)."""
+    neighbour; none inside a chain (resultant < 0.5). ``offset`` (rad) turns them all
+    (then each needs the clearance, the first too)."""
     out: list[Deployment] = []
     mean, res = circular_mean(L.bearings(p).values())
     if res < 0.5:
         return out
-    for k in (0, 1, -1, 2, -2):
-        d = wrap(mean + math.pi + k * _PI3)
+    for k in (0, 1, -1, 2, -2) if not offset else (0, 1, -1, 2, -2, 3):
+        d = wrap(mean + math.pi + offset + k * _PI3)
         c = L.clearance(p, d)
-        if k == 0 or c >= _SINGLE_CLEAR:
+        if (k == 0 and not offset) or c >= _SINGLE_CLEAR:
             out.append(Deployment(nid, d, None, 0, 0.0, c, "single_file"))
     return out
 
@@ -153,6 +154,18 @@ def robot_deployments(cx: Complex, L: _Local, room: Room, deps: Deps,
                        if not room.blocked(p, dp.bearing, cone=_PI3 / 4.0)]
             if not deps[p]:
                 del deps[p]
+
+    # a chain end whose single-file drives all touched (five, each blocking 30 deg either
+    # side: the whole wedge) tries the directions between them, but where a drive of its
+    # own went, as a lone robot does: a robot in a 0.30 rv doorway touched the jambs on
+    # all five, the nearest 23 and 36 deg off the way through, and the room behind was
+    # certified uncovered (bench/truth.py seed 4 map 188)
+    for p in np.nonzero(single)[0].tolist():
+        if p not in deps and p in room.failed:
+            lst = [dp for dp in _single_file(L, p, int(ids[p]), _PI3 / 2.0)
+                   if not room.blocked(p, dp.bearing, cone=_PI3 / 4.0)]
+            if lst:
+                deps[p] = lst
 
     # a robot with a frontier edge deploys off the edge (60 deg, triangles); the single-file
     # direction is its fallback once those are gone (a corridor too narrow for triangles
