@@ -82,6 +82,10 @@ def lattice_points(w: float, h: float, s: float) -> np.ndarray:
     y = h, every row's ends on x = 0 and x = w (stretched to fit, so edges shrink below s)."""
     rows = max(1, math.ceil(h / (TRI * s) - 1e-9))
     cols = max(1, math.ceil(w / s - 1e-9))
+    # the tolerance must not stretch an edge past s (w = 1.0000000000000002 at s = rv
+    # gave dx > rv, and the Rips triangles no longer tiled: hypothesis found it)
+    rows += h / rows > TRI * s
+    cols += w / cols > s
     dy, dx = h / rows, w / cols
     pts = []
     for k in range(rows + 1):

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from matplotlib.path import Path as MplPath
 from scipy.spatial import cKDTree
@@ -38,6 +38,7 @@ def _covered(P: np.ndarray, rv: float, pts: np.ndarray) -> np.ndarray:
 
 @settings(max_examples=25, deadline=None)
 @given(w=st.floats(1.0, 7.0), h=st.floats(1.0, 5.0), s=st.floats(0.6, 1.0))
+@example(w=1.0000000000000002, h=1.0, s=1.0)   # a width just past a whole number of s
 def test_the_oracle_lattice_tiles_its_rectangle_and_respects_the_euler_bound(w, h, s):
     rv = 1.0
     P = bounds.lattice_points(w, h, s)
