@@ -294,10 +294,10 @@ def test_a_robot_in_a_narrow_door_whose_drives_all_touched_the_jambs():
     drives placed back in the first room form a dangling edge. Its five other drives
     (each then excluding 30 deg either side of it; the nearest 23 and 36 deg off the
     way through the door) touched the jambs, the edge's sides closed as 'probes' and
-    'convex_corner', and the room behind,
-    5.1 m^2, was certified uncovered (54.6%), with corner_wait on or off. A chain end
-    whose single-file drives all touched now tries the directions between them, as a lone
-    robot does (coordinator.topology.fence_deploy.robot_deployments)."""
+    'convex_corner', and the room behind, 5.1 m^2, was certified uncovered (54.6%), with
+    corner_wait on or off. A chain end whose single-file drives all touched now tries the
+    directions between them, as a lone robot does
+    (coordinator.topology.fence_deploy.robot_deployments)."""
     case = truth.make_map(4, 188)
     assert case.kind == "two_rooms" and case.door_w < 0.4 * RV
     row = truth.run_map(case)

@@ -144,26 +144,19 @@ def robot_deployments(cx: Complex, L: _Local, room: Room, deps: Deps,
                 deps[p] = keep
             else:
                 del deps[p]
-    # a robot with no neighbour whose six drives all touched (each blocks 30 deg either
-    # side, so together the whole circle) tries the six directions between them, but where
-    # a drive of its own went: the first robot, whose six drives all touched within d0,
-    # ended the run alone at 15% coverage (bench/truth.py seed 2 map 387)
-    for p in np.nonzero(cx.degree == 0)[0].tolist():
+    # a robot with no neighbour, or a chain end, whose drives all touched (each blocks 30
+    # deg either side: six take the whole circle, five a chain end's wedge) tries the
+    # directions between them, but where a drive of its own went: the first robot, its six
+    # drives all touched within d0, ended the run alone at 15% coverage (bench/truth.py
+    # seed 2 map 387); a robot in a 0.30 rv doorway touched the jambs on all five, the
+    # nearest 23 and 36 deg off the way through, and the room behind was certified
+    # uncovered (seed 4 map 188)
+    for p in np.nonzero((cx.degree == 0) | single)[0].tolist():
         if p not in deps:
-            deps[p] = [dp for dp in _isolated(int(ids[p]), default_bearing, _PI3 / 2.0)
-                       if not room.blocked(p, dp.bearing, cone=_PI3 / 4.0)]
-            if not deps[p]:
-                del deps[p]
-
-    # a chain end whose single-file drives all touched (five, each blocking 30 deg either
-    # side: the whole wedge) tries the directions between them, but where a drive of its
-    # own went, as a lone robot does: a robot in a 0.30 rv doorway touched the jambs on
-    # all five, the nearest 23 and 36 deg off the way through, and the room behind was
-    # certified uncovered (bench/truth.py seed 4 map 188)
-    for p in np.nonzero(single)[0].tolist():
-        if p not in deps and p in room.failed:
-            lst = [dp for dp in _single_file(L, p, int(ids[p]), _PI3 / 2.0)
-                   if not room.blocked(p, dp.bearing, cone=_PI3 / 4.0)]
+            nid = int(ids[p])
+            ring = (_isolated(nid, default_bearing, _PI3 / 2.0) if cx.degree[p] == 0
+                    else _single_file(L, p, nid, _PI3 / 2.0))
+            lst = [dp for dp in ring if not room.blocked(p, dp.bearing, cone=_PI3 / 4.0)]
             if lst:
                 deps[p] = lst
 
