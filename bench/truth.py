@@ -74,6 +74,7 @@ KINDS = ("rect", "L", "boxes", "clutter", "two_rooms")
 KIND_P = (0.14, 0.14, 0.14, 0.14, 0.44)
 BUCKETS = ("0.30", "0.45", "0.60", "0.75", "0.85", ">=0.95")
 _BUCKET_W = (0.30, 0.45, 0.60, 0.75, 0.85)
+DOOR_EDGE_RV = (0.40, 0.50)   # --doors: widths at the guarantee's edge (door_min_rv = 0.4)
 
 
 def door_bucket(w: float | None) -> str | None:
@@ -129,12 +130,20 @@ def _place_rects(rng, W, H, n, lo, hi, gap, keep_out, tries=400):
     return [_rect(*r) for r in out]
 
 
-def make_map(seed: int, index: int, raster: float = 0.0) -> MapCase:
+def make_map(seed: int, index: int, raster: float = 0.0, doors: bool = False) -> MapCase:
     """The ``index``-th random map of campaign ``seed``; with ``raster`` > 0 (m) the same
     map turned by 5-40 deg about its centre (its own random stream) and drawn on a grid of
-    that cell (:func:`raster_map`): oblique walls in steps, as a ROS map draws them."""
+    that cell (:func:`raster_map`): oblique walls in steps, as a ROS map draws them.
+
+    ``doors``: every map is two rooms joined by one door at the guarantee's edge, drawn
+    from a stream of its own (the rest of the map, source and noise as without it): width
+    ``DOOR_EDGE_RV`` (0.40-0.50 rv, door_min_rv and just above), a dividing wall
+    0.05-0.30 m thick (a thick one makes the door a short passage), and one door in four
+    flush with the outer wall (the jamb a corner)."""
     rng = np.random.default_rng([int(seed), int(index)])
     kind = KINDS[int(rng.choice(len(KINDS), p=KIND_P))]
+    if doors:
+        kind = "two_rooms"
     facing = bool(rng.random() < 1.0 / 3.0)
     noise = NOISE_DEG if (index % 2 == 1) else 0.0
     door_w = None
@@ -166,9 +175,21 @@ def make_map(seed: int, index: int, raster: float = 0.0) -> MapCase:
         xw = rng.uniform(0.4, 0.6) * W
         t = 0.1
         yc = rng.uniform(0.1 + door_w / 2, H - 0.1 - door_w / 2)
+        if doors:
+            rd = np.random.default_rng([int(seed), int(index), 11])
+            door_w = rd.uniform(*DOOR_EDGE_RV) * RV
+            t = rd.uniform(0.05, 0.30)
+            flush = rd.random() < 0.25
+            yc = ((door_w / 2 if rd.random() < 0.5 else H - door_w / 2) if flush
+                  else rd.uniform(0.1 + door_w / 2, H - 0.1 - door_w / 2))
         y0, y1 = yc - door_w / 2, yc + door_w / 2
-        outer = np.array([[0, 0], [xw, 0], [xw, y0], [xw + t, y0], [xw + t, 0], [W, 0], [W, H],
-                          [xw + t, H], [xw + t, y1], [xw, y1], [xw, H], [0, H]], float)
+        ring = [[0, 0], [xw, 0], [xw, y0], [xw + t, y0], [xw + t, 0], [W, 0], [W, H],
+                [xw + t, H], [xw + t, y1], [xw, y1], [xw, H], [0, H]]
+        # a flush door: the divider's stub on that side is gone, no zero-length walls
+        keep = [q for k, q in enumerate(ring) if not np.allclose(q, ring[k - 1])]
+        keep = [q for k, q in enumerate(keep)
+                if abs(np.cross(np.subtract(q, keep[k - 1]), np.subtract(keep[(k + 1) % len(keep)], q))) > 1e-12]
+        outer = np.array(keep, float)
         room_a = (0.0, 0.0, xw, H)
     pm = PolyMap(outer)
     lo, hi = pm.outer.min(axis=0), pm.outer.max(axis=0)
@@ -798,7 +819,7 @@ def _planner_claim(sw: Swarm, case: MapCase, P, fb: Feedback, reps: dict) -> boo
 def run_index(args) -> dict:
     seed, idx, kw = args
     kw = dict(kw)
-    case = make_map(seed, idx, kw.pop("raster", 0.0))
+    case = make_map(seed, idx, kw.pop("raster", 0.0), kw.pop("doors", False))
     try:
         return run_map(case, **kw)
     except Exception as e:  # a crash in the system under test is a finding, not the end
@@ -958,6 +979,10 @@ def main(argv=None) -> int:
     ap.add_argument("--raster", type=float, default=0.0, metavar="M",
                     help="turn every map 5-40 deg and draw it on a grid of M metres (walls in "
                          "steps, as a ROS map's; e.g. 0.05, the cave's)")
+    ap.add_argument("--doors", action="store_true",
+                    help="every map two rooms joined by a door 0.40-0.50 rv wide (the "
+                         "guarantee's edge), in a wall 0.05-0.30 m thick, one in four flush "
+                         "with the outer wall")
     a = ap.parse_args(argv)
     if a.maps < 1 or a.jobs < 1:
         print("truth.py: --maps and --jobs must be >= 1", file=sys.stderr)
@@ -969,7 +994,7 @@ def main(argv=None) -> int:
         topo[name.strip()] = (low == "true") if low in ("true", "false") else float(val)
     kw = {"per_cycle": a.per_cycle, "headings": a.headings, "door_min_rv": a.door_min_rv,
           "topology": topo, "wall_keep_rv": a.wall_keep_rv, "raster": a.raster,
-          "hold_rooms": a.hold_rooms}
+          "hold_rooms": a.hold_rooms, "doors": a.doors}
     t0 = time.time()
     if a.only:
         rows = [run_index((a.seed, i, kw)) for i in a.only]

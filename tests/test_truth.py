@@ -128,6 +128,25 @@ def test_maps_are_seeded_and_sources_face_walls():
     assert min(doors) >= 0.3 and max(doors) <= 1.2
 
 
+
+def test_door_edge_maps_put_one_door_at_the_guarantee_edge():
+    """``make_map(..., doors=True)`` (``--doors``): two rooms joined by one door 0.40-0.50 rv
+    wide in a wall 0.05-0.30 m thick, some flush with the outer wall; each a closed room
+    a robot can cross into the second room, and seeded."""
+    cases = [truth.make_map(0, i, doors=True) for i in range(40)]
+    assert all(c.kind == "two_rooms" for c in cases)
+    assert all(0.4 * RV <= c.door_w <= 0.5 * RV for c in cases)
+    assert np.array_equal(cases[5].pm.outer, truth.make_map(0, 5, doors=True).pm.outer)
+    flush = [c for c in cases if len(c.pm.outer) == 8]       # the divider's stub is gone
+    assert 3 <= len(flush) <= 20
+    for c in cases[:12]:
+        xs = sorted({round(float(x), 9) for x in c.pm.outer[:, 0]})
+        thick = xs[2] - xs[1]                                 # 0, xw, xw + t, W
+        assert 0.05 - 1e-9 <= thick <= 0.30 + 1e-9
+        ras = Raster(c.pm, 0.05)
+        far = (xs[-1] - 0.3, float(c.pm.outer[:, 1].max()) / 2)
+        assert reachable(ras, c.source, R)[ras.cell_of(far)], c.index
+
 def test_cells_meeting_only_at_a_corner_are_joined():
     """raster_map traces free cells into rings; two that touch only at a corner would make
     a ring cross itself, so one of the block's other two cells is freed (both diagonals)."""
