@@ -25,7 +25,7 @@ otherwise unchanged.
     python bench/drift.py configs/open_room.toml --seeds 0 --oracle
     python bench/drift.py configs/open_room.toml --seeds 0 --plot drift   # drift_open_room_s0.png
 
-Measured (2026-11-28, seed 0, README "Where the vertices drift"): open_room 966
+Measured (2026-11-28, seed 0, docs/measured.md, "Where the vertices drift"): open_room 966
 replacements, mean 1.5 cm (one landmark: 24 moves at 15 cm, 26% of the total; two: 351 at
 1.8 cm; four or more: 0.6 cm); pillar_hall 820 at 2.7 cm, 99th percentile 89 cm.
 Drift-free (``--oracle``): open_room 136 -> 118 robots (mean edge 0.816 -> 0.864 rv),

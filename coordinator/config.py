@@ -174,7 +174,7 @@ class CoordinatorConfig:
                                    # false: the whole push waits for it. In-process, every
                                    # config seeds 0-2, against false before the settle fix
                                    # (Pushes._claimed_elsewhere): 2,357 -> 2,351 robots,
-                                   # 44,295 -> 40,710 s simulated (hall300: README)
+                                   # 44,295 -> 40,710 s simulated (hall300: docs/measured.md)
     max_cycles: int = 100000
     final_recheck: bool = True     # after K is empty: redistribute redundant robots, re-certify
 

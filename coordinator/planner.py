@@ -275,7 +275,7 @@ def _fallback_sides(snap: Snapshot, jobs: list[JobSpec]) -> frozenset:
     placed by its fallback (``Placed.SPEC``: no free lattice point) from a frontier robot
     resting on a wall (its contact in ``snap``). Along a wall that fallback is the spec's
     60-deg direction, which there runs along the wall: it laid a second row under the
-    lattice's last (pillar_hall seed 0: 9 of the 10 robots of its bottom row; README,
+    lattice's last (pillar_hall seed 0: 9 of the 10 robots of its bottom row; docs/measured.md,
     "Where the robots go"), where a sweep of the side may find no room. (Counting a failed
     drive as a wall too asked more and cost more: pillar_hall seed 0, 121 robots against
     116 and 110 without asking.)"""

@@ -191,7 +191,7 @@ def _deploy_spacing(cfg) -> float:
 
 # the packages a run's numbers depend on (physics, geometry, linear algebra, the bus): the
 # same code and seed gave 2,216 and 2,249 robots over one campaign in two sessions whose
-# package versions were not recorded (README, "Issue 19's targets today")
+# package versions were not recorded (docs/measured.md, "Issue 19's targets today")
 SOFTWARE = ("numpy", "scipy", "pymunk", "eclipse-zenoh", "msgspec", "msgpack", "contourpy")
 
 

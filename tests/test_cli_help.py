@@ -114,9 +114,9 @@ def test_the_option_reader_sees_fake_robots_flags():
 
 
 def _readme_cli_lines() -> list[tuple[str, str]]:
-    """(command, its arguments) of every `swarmcover CMD ...` in README.md: inline code and
-    lines of code blocks."""
-    text = (ROOT / "README.md").read_text()
+    """(command, its arguments) of every `swarmcover CMD ...` in README.md and docs/*.md:
+    inline code and lines of code blocks."""
+    text = "\n".join(f.read_text() for f in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))])
     blocks = re.findall(r"```\w*\n(.*?)```", text, re.S)
     prose = re.sub(r"```\w*\n.*?```", "", text, flags=re.S)
     spans = [" ".join(sp.split()) for sp in re.findall(r"`([^`]+)`", prose)]

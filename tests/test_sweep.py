@@ -379,7 +379,7 @@ def test_a_gap_a_robot_of_the_swarm_stopped_the_sweeps_at_is_not_probed(case, pr
     Of several stoppers (robots 42 and 43 at vertices 3 and 4) one place held is enough;
     a robot booked at two places (42 at vertex 3 for the first sweep, pushed on to 4 for
     the later ones) vouches for neither. Asking every stop's place to be held instead was
-    measured and left out (README, "A stopper vouches for a gap only from a place it
+    measured and left out (docs/measured.md, "A stopper vouches for a gap only from a place it
     stood still at")."""
     from swarmcover.coordinator.jobs import evidence_kwargs
     by = {"nobody": (), "was_moving": {42: None}, "unplaced": (42,),

@@ -1,7 +1,7 @@
 """Sides swept before they are deployed (``TopologyParams.sweep_fallbacks``).
 
 A push whose deployment found no free lattice point, from a robot that felt a wall, laid a
-second row of robots along the walls (README, "Where the robots go"). With the flag the
+second row of robots along the walls (docs/measured.md, "Where the robots go"). With the flag the
 planner asks its side to be swept first (``CyclePlan.sweep_first``, detect_fence's
 ``sweep_first``). The side then closes only on the sweeps' evidence: whatever its sweeps
 would lead a candidate to by inference sends it back to its deployments, so asking can

@@ -347,7 +347,7 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
             asked = ends[(e, sg)] == "sweep_first"
             # an asked side's end with no wall of its own drives along its partner's wall
             # normal: the side's own normal may cross the strip along that wall obliquely,
-            # deeper than the no-room depth (README, "Where the robots go")
+            # deeper than the no-room depth (docs/measured.md, "Where the robots go")
             inner, n_open, n_clear = _side_sweeps(cx, L, P, room, ev, e, sg, borrow=asked)
             over = not inner and n_open > 0     # sweeps over, a gap left
             if over and asked and (key in ev.foreign or _unbounded_gap(ev, key)):
@@ -394,7 +394,7 @@ def plan_probes(cx: Complex, L: _Local, P: TopologyParams, room: Room, ev: Probe
             # 'sweep_blocked': a robot of the swarm (linked to a source) stood in the way
             # of one, and the space in front of the side is where it stands (probing such
             # gaps placed robots there: seed 0, small 25 -> 33 robots, pillar_hall 122 ->
-            # 141, cave 128 -> 138; README, "A gap the sweeps left is probed").
+            # 141, cave 128 -> 138; docs/measured.md, "A gap the sweeps left is probed").
             # 'sweep_gap': no probe line falls in the gap (or TopologyParams.gap_probes
             # is off)
             marks[(e, sg)] = gap_why

@@ -38,14 +38,14 @@ class TopologyParams:
       'convex_corner'), a door the guarantee covers. Before, off: it removed map 70's false
       certificate (a 0.30 rv door), and corridor_doors (seed 0, in-process, before wall
       sweeps) took 94 robots / 150 cycles with it against 75 / 85 without; with today's
-      rules that run is the same both ways (README, "A robot in a doorway").
+      rules that run is the same both ways (docs/measured.md, "A robot in a doorway").
     tilt_min: a probe that touched with its touch sector's centre more than this (rad) off
       the direction driven is driven again along that centre, near the wall's normal, and
       so is each probe of a side whose end rests on a wall that far off
       (coordinator.topology.evidence); below it the perpendicular line is already within
       tau + tilt_min of the normal. Default tau: a touch in the line's own sector is not
-      re-driven. Measured (corridor_doors, seed 0, in-process; truth campaigns in the
-      README): 3 deg gave 0.41 rv doors at any angle but 90 robots / 4,231 s against 75 /
+      re-driven. Measured (corridor_doors, seed 0, in-process; truth campaigns in
+      docs/measured.md): 3 deg gave 0.41 rv doors at any angle but 90 robots / 4,231 s against 75 /
       1,785 s (every re-drive disturbs the swarm a little, and more sides get probed);
       11.25 deg 3,824 s; tau 2,155 s. pi never re-drives (the rules before 2026-11-25).
       Not used when ``sweep`` is on (a sweep follows the wall at whatever angle).
@@ -69,7 +69,7 @@ class TopologyParams:
       false certificate bench/truth.py met with it (seed 0 map 429) came from the bench's
       booking of rooms, not the rule: booked as the deployer books them (run_map's
       ``hold_rooms``, now the bench's default), 500 of 500 maps certified, 0 false, on
-      seeds 0 and 1 each (README, issue 19).
+      seeds 0 and 1 each (docs/measured.md, issue 19).
     gap_probes: a side whose sweeps are over with a gap left and no end's room found drives
       the probe lines that fall in the gaps (coordinator.topology.fence_probes) and closes
       on their touches ('gap_probes', evidence) or as the probe rule's inferences, unless a
@@ -82,7 +82,7 @@ class TopologyParams:
       contact) is not driven: its side is asked to be swept first
       (coordinator.planner, detect_fence's ``sweep_first``) and closes only on the sweeps'
       evidence; else it is deployed as before. The fallbacks laid second rows of robots
-      along the walls (README, "Where the robots go").
+      along the walls (docs/measured.md, "Where the robots go").
     """
 
     rv: float = 1.0
