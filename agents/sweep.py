@@ -158,6 +158,24 @@ class SweepGeom:
         the other end."""
         return math.atan2(-(R[0] * self.ex + R[1] * self.ey), R[0] * self.nx + R[1] * self.ny)
 
+    def ahead(self, R, radius: float) -> bool:
+        """Whether R is in front of the edge's line, on the side swept (half a body behind
+        it still counts). Only such a place joins the edge: a wall that leads behind the
+        line (under the vertex, past the edge's end) is in front of no part of it, though
+        R's projection on the edge grows along it (bench/truth.py --doors seed 0 map 145:
+        a floor running under the vertex took a sweep to fraction 0.35 behind the line,
+        past a 0.47 rv door at the vertex, and the side closed over it)."""
+        return R[0] * self.nx + R[1] * self.ny >= -0.5 * radius
+
+    def behind(self, R, radius: float) -> bool:
+        """Whether R is behind the edge's line by more than ``radius``."""
+        return R[0] * self.nx + R[1] * self.ny < -radius
+
+    def in_front(self, R) -> bool:
+        """Whether R is on the swept side of the edge's line (strictly: a phase that
+        leaves that side must first have been there, by a body radius of hysteresis)."""
+        return R[0] * self.nx + R[1] * self.ny >= 0.0
+
     def depth_of(self, R) -> float:
         """Distance from R to the edge segment (the points' unit)."""
         t = min(1.0, max(0.0, self.frac(R))) * self.length
@@ -198,6 +216,8 @@ class Sweep(ModeState):
         self.phase = 1
         self.R: tuple[float, float] | None = start   # where it is (reference frame, m)
         self.hi, self.lo = -math.inf, math.inf
+        self.last_phi: float | None = None   # phi at the last tick of phase 2 (rad)
+        self.armed = False                   # in front of the edge's line since the phase began
         self.lost = 0.0                      # travel with no wall felt (m)
         self.turned = 0.0                    # turned round a wall's end (rad)
         # the turn back (rad, + round a wall's end) since n last held for a body length
@@ -244,11 +264,15 @@ class Sweep(ModeState):
 
     def _end(self, why: str = "") -> Tick:
         lo = -math.inf if why == "end" else self.lo
-        return Tick(outcome=Outcome.SWEPT, reason=sweep_reason(self.hi, lo, self.by))
+        hi = self.hi
+        if not math.isfinite(hi):
+            hi = lo = 0.0                    # never in front of the edge: nothing joined
+        return Tick(outcome=Outcome.SWEPT, reason=sweep_reason(hi, lo, self.by))
 
     def _phase_two(self) -> None:
         """Back towards the vertex: the other hand, counts from zero."""
         self.phase, self.h, self.heard = 2, -self.h, False
+        self.last_phi, self.armed = None, False
         self.lost = self.travelled = self.turned = self.wound = self.steady = 0.0
         self.ref, self.ref_at = self.n, self.R
 
@@ -329,7 +353,9 @@ class Sweep(ModeState):
         if self.into is not None:
             return self._drive_into(ctx, psi)
         f = g.frac(R)
-        self.hi, self.lo = max(self.hi, f), min(self.lo, f)
+        ahead = g.ahead(R, p.radius)
+        if ahead:
+            self.hi, self.lo = max(self.hi, f), min(self.lo, f)
         self.steady += step
         if self.steady >= 2.0 * p.radius:
             self.wound = 0.0                 # a wall followed a body length: the reference
@@ -349,13 +375,26 @@ class Sweep(ModeState):
                 self._turn(wrap(self.n + self.h * 2.0 * p.tau), False)
                 self.turned += 2.0 * p.tau
                 self.lost = 0.0
-        if self.phase == 1 and f >= g.far:
+        if self.phase == 1 and f >= g.far and ahead:
             if g.depth_of(R) > g.depth:
                 # the far line from the edge to here must lie in the edge's own lens
                 return Tick(outcome=Outcome.DONE, reason="room")
             self._phase_two()
-        if self.phase == 2 and g.phi(R) >= g.stop and math.hypot(*R) > 1e-6:
-            return self._end("end")
+        ph = g.phi(R)
+        if self.phase == 2:
+            # it ends where it crosses the ray, going round the vertex from the edge's front
+            # (a phase that starts past the ray has swept nothing between)
+            crossed = self.last_phi is not None and self.last_phi < g.stop <= ph
+            self.last_phi = ph
+            if crossed and math.hypot(*R) > 1e-6:
+                return self._end("end")
+        self.armed = self.armed or g.in_front(R)
+        if self.armed and g.behind(R, p.radius):
+            # the wall led behind the edge's line: in front of no part of the edge; the
+            # phase stops short there
+            if self.phase == 2:
+                return self._end()
+            self._phase_two()
         if not g.held(R):
             return Tick(outcome=Outcome.DONE, reason="room")
         t = self.n - self.h * PI / 2.0

@@ -139,6 +139,15 @@ class Sweeper:
         d = R - self.E
         return math.atan2(float(d @ -self.e), float(d @ self.ns))
 
+    def ahead(self, R) -> bool:
+        """Whether R is in front of the edge's line (on the swept side; half a body
+        behind it still counts): only such a place joins the edge (agents.sweep.SweepGeom)."""
+        return float((R - self.E) @ self.ns) >= -0.5 * self.r
+
+    def behind(self, R) -> bool:
+        """Whether R is behind the edge's line by more than a body radius."""
+        return float((R - self.E) @ self.ns) < -self.r
+
     def depth_of(self, R) -> float:
         """Distance (m) from R to the edge segment."""
         t = min(1.0, max(0.0, self.frac(R)))
@@ -211,10 +220,17 @@ class Sweeper:
     def run(self, R0, touch_dir: float, far: float, stop: float) -> SweepResult:
         """Sweep from R0, where the first drive touched a wall in world direction
         ``touch_dir`` (its touch sector's centre is the first normal)."""
+        res = self._run(R0, touch_dir, far, stop)
+        if res.kind == "swept" and not math.isfinite(res.hi):
+            res.hi = res.lo = 0.0        # never in front of the edge: nothing joined
+        return res
+
+    def _run(self, R0, touch_dir: float, far: float, stop: float) -> SweepResult:
         body = touch_dir - self.heading
         n = wrap(round(body / self.w) * self.w + self.heading)
         R = np.asarray(R0, float).copy()
-        hi = lo = self.frac(R)
+        # only a place in front of the edge's line joins the edge (the agent's rule)
+        hi, lo = (self.frac(R), self.frac(R)) if self.ahead(R) else (-math.inf, math.inf)
         # phase 1 keeps the wall on the hand that moves it towards Q
         t = _unit(n - math.pi / 2.0)
         h = 1 if (t @ self.e > 1e-9 or (abs(t @ self.e) <= 1e-9 and t @ self.ns > 0)) else -1
@@ -229,16 +245,32 @@ class Sweeper:
             steady = 0.0         # travel since n last turned (m)
             ref, ref_at = n, R.copy()   # the normal last held for a body length, and where
             n0_held = False      # the wall whose end it goes round was held a body length
+            armed = False        # in front of the edge's line since the phase began
+            last_phi = self.phi(R)
             while True:
                 f = self.frac(R)
-                hi, lo = max(hi, f), min(lo, f)
-                if phase == 1 and f >= far:
+                ahead = self.ahead(R)
+                if ahead:
+                    hi, lo = max(hi, f), min(lo, f)
+                if phase == 1 and f >= far and ahead:
                     if self.depth_of(R) > self.depth:
                         # the far line from the edge to here lies in the edge's own lens
                         return SweepResult("room", R, hi, lo, False, total)
                     break
-                if phase == 2 and self.phi(R) >= stop and np.linalg.norm(R - self.E) > 1e-6:
+                ph = self.phi(R)
+                if (phase == 2 and last_phi < stop <= ph
+                        and np.linalg.norm(R - self.E) > 1e-6):
                     return SweepResult("swept", R, hi, -math.inf, False, total, " ".join(why),
+                                       by=tuple(sorted(self._by)))
+                last_phi = ph
+                armed = armed or float((R - self.E) @ self.ns) >= 0.0
+                if armed and self.behind(R):
+                    # the wall led behind the edge's line: what it follows there is in
+                    # front of no part of the edge; the phase stops short
+                    why.append(f"{phase}:behind")
+                    if phase == 1:
+                        break
+                    return SweepResult("swept", R, hi, lo, False, total, " ".join(why),
                                        by=tuple(sorted(self._by)))
                 if not self.held(R):
                     return SweepResult("room", R, hi, lo, False, total)

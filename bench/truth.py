@@ -102,6 +102,11 @@ class MapCase:
     seed: int = 0
 
 
+def _cross2(a, b) -> float:
+    """z of the cross product of two 2-vectors."""
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
 def _rect(x0, y0, x1, y1):
     return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], float)
 
@@ -188,7 +193,7 @@ def make_map(seed: int, index: int, raster: float = 0.0, doors: bool = False) ->
         # a flush door: the divider's stub on that side is gone, no zero-length walls
         keep = [q for k, q in enumerate(ring) if not np.allclose(q, ring[k - 1])]
         keep = [q for k, q in enumerate(keep)
-                if abs(np.cross(np.subtract(q, keep[k - 1]), np.subtract(keep[(k + 1) % len(keep)], q))) > 1e-12]
+                if abs(_cross2(np.subtract(q, keep[k - 1]), np.subtract(keep[(k + 1) % len(keep)], q))) > 1e-12]
         outer = np.array(keep, float)
         room_a = (0.0, 0.0, xw, H)
     pm = PolyMap(outer)

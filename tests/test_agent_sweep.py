@@ -484,3 +484,28 @@ def test_a_wall_in_the_next_side_s_lens_is_swept_not_taken_for_room(ang):
     beh, trace, modes = _run(wm, pts, task((2, 5)))
     assert (beh.task_state, beh.reason) == ("done", "")
     assert math.dist(trace[-1], pts[0]) == pytest.approx(0.75, abs=0.03)
+
+
+def test_a_wall_that_leads_behind_the_edge_s_line_joins_none_of_it():
+    """bench/truth.py --doors seed 0 map 145: the vertex robot 0 stands 0.13 m above a
+    floor, 0.08 m in front of a 0.47 m door through a wall 0.3 m thick (a short passage
+    along the floor to a second room); its edge to robot 1 climbs steeply away from the
+    floor, the side swept faces the door. The first drive runs into the passage and
+    touches the floor; phase 1, towards robot 1, follows the floor under the vertex and
+    behind the edge's line, where the projection on the edge grows: the sweep once reported
+    fraction 0.35 joined and the side closed over the door. Only a place in front of the
+    line joins the edge, and a phase stops short where the wall leads behind it; phase 2
+    then follows the floor through the passage into the second room and stays there."""
+    ring = [[0.0, 0.0], [6.363, 0.0], [6.363, 3.787], [3.771, 3.787], [3.771, 0.469],
+            [3.476, 0.469], [3.476, 3.787], [0.0, 3.787]]
+    pts = {0: (3.40, 0.13), 1: (3.15, 0.99), 2: (2.53, 0.36), 3: (2.29, 1.23),
+           4: (1.65, 0.60)}
+    wm, pts, rot = _scene(None, 0.0, ring=ring, others=pts)
+    pts = {k: pts[k] for k in (0, 1, 2, 3, 4)}
+    # a first drive 60 deg below the edge's perpendicular touches the floor at the door
+    # (the bench's drive at -14 deg touched there; the world's physics slides it along)
+    task = _task(pts, rot, far=0.496, stop_deg=90.0, direction_deg=-60.0, side=-1,
+                 distance=None, lenses=True)
+    beh, trace, modes = _run(wm, pts, task, ticks=2400)
+    assert beh.task_state == "done", beh.reason       # it stayed: room, not swept
+    assert trace[-1][0] > 3.771, trace[-1]              # in the second room

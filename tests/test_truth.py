@@ -322,3 +322,17 @@ def test_a_robot_in_a_narrow_door_whose_drives_all_touched_the_jambs():
     row = truth.run_map(case)
     assert row["end"] == "fixed" and not row["false_certificate"], (row["coverage"],)
     assert row["coverage"] > 0.995
+
+
+
+def test_a_sweep_along_a_floor_under_its_vertex_joins_none_of_the_edge():
+    """bench/truth.py --doors seed 0 map 145: a 0.47 rv door flush with the floor, in a wall
+    0.3 m thick, 0.08 m in front of a robot. Its sweep followed the floor under it, behind
+    the edge's line, to fraction 0.35, and the sides closed on that evidence: certified at
+    59.3% coverage. Only places in front of the edge's line join it now (bench/sweep.py,
+    agents/sweep.py): the sweep follows the floor through the door and stays there."""
+    case = truth.make_map(0, 145, doors=True)
+    assert case.kind == "two_rooms" and 0.4 * RV <= case.door_w < 0.5 * RV
+    row = truth.run_map(case)
+    assert row["end"] == "fixed" and row["certified"]
+    assert not row["false_certificate"] and row["coverage"] > 0.995, row["coverage"]
