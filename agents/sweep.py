@@ -158,23 +158,15 @@ class SweepGeom:
         the other end."""
         return math.atan2(-(R[0] * self.ex + R[1] * self.ey), R[0] * self.nx + R[1] * self.ny)
 
-    def ahead(self, R, radius: float) -> bool:
-        """Whether R is in front of the edge's line, on the side swept (half a body behind
-        it still counts). Only such a place joins the edge: a wall that leads behind the
-        line (under the vertex, past the edge's end) is in front of no part of it, though
-        R's projection on the edge grows along it (bench/truth.py --doors seed 0 map 145:
-        a floor running under the vertex took a sweep to fraction 0.35 behind the line,
-        past a 0.47 rv door at the vertex, and the side closed over it)."""
-        return R[0] * self.nx + R[1] * self.ny >= -0.5 * radius
-
-    def behind(self, R, radius: float) -> bool:
-        """Whether R is behind the edge's line by more than ``radius``."""
-        return R[0] * self.nx + R[1] * self.ny < -radius
-
-    def in_front(self, R) -> bool:
-        """Whether R is on the swept side of the edge's line (strictly: a phase that
-        leaves that side must first have been there, by a body radius of hysteresis)."""
-        return R[0] * self.nx + R[1] * self.ny >= 0.0
+    def offset(self, R) -> float:
+        """R's signed distance from the edge's line, positive on the side swept (the
+        points' unit). Only a place in front of the line (>= -radius / 2) joins the edge:
+        a wall that leads behind it (under the vertex, past the edge's end) is in front of
+        no part of the edge, though R's projection on it grows there (bench/truth.py
+        --doors seed 0 map 145: a floor running under the vertex took a sweep to fraction
+        0.35 behind the line, past a 0.47 rv door at the vertex, and the side closed over
+        it). A phase that was in front (>= 0) stops short once behind by a radius."""
+        return R[0] * self.nx + R[1] * self.ny
 
     def depth_of(self, R) -> float:
         """Distance from R to the edge segment (the points' unit)."""
@@ -353,7 +345,8 @@ class Sweep(ModeState):
         if self.into is not None:
             return self._drive_into(ctx, psi)
         f = g.frac(R)
-        ahead = g.ahead(R, p.radius)
+        off = g.offset(R)
+        ahead = off >= -0.5 * p.radius
         if ahead:
             self.hi, self.lo = max(self.hi, f), min(self.lo, f)
         self.steady += step
@@ -388,8 +381,8 @@ class Sweep(ModeState):
             self.last_phi = ph
             if crossed and math.hypot(*R) > 1e-6:
                 return self._end("end")
-        self.armed = self.armed or g.in_front(R)
-        if self.armed and g.behind(R, p.radius):
+        self.armed = self.armed or off >= 0.0
+        if self.armed and off < -p.radius:
             # the wall led behind the edge's line: in front of no part of the edge; the
             # phase stops short there
             if self.phase == 2:

@@ -139,14 +139,11 @@ class Sweeper:
         d = R - self.E
         return math.atan2(float(d @ -self.e), float(d @ self.ns))
 
-    def ahead(self, R) -> bool:
-        """Whether R is in front of the edge's line (on the swept side; half a body
-        behind it still counts): only such a place joins the edge (agents.sweep.SweepGeom)."""
-        return float((R - self.E) @ self.ns) >= -0.5 * self.r
-
-    def behind(self, R) -> bool:
-        """Whether R is behind the edge's line by more than a body radius."""
-        return float((R - self.E) @ self.ns) < -self.r
+    def offset(self, R) -> float:
+        """R's signed distance (m) from the edge's line, positive on the side swept: only a
+        place in front of it (>= -r / 2) joins the edge; a phase that was in front (>= 0)
+        stops short once behind by r (agents.sweep.SweepGeom.offset)."""
+        return float((R - self.E) @ self.ns)
 
     def depth_of(self, R) -> float:
         """Distance (m) from R to the edge segment."""
@@ -230,7 +227,8 @@ class Sweeper:
         n = wrap(round(body / self.w) * self.w + self.heading)
         R = np.asarray(R0, float).copy()
         # only a place in front of the edge's line joins the edge (the agent's rule)
-        hi, lo = (self.frac(R), self.frac(R)) if self.ahead(R) else (-math.inf, math.inf)
+        hi, lo = ((self.frac(R), self.frac(R)) if self.offset(R) >= -0.5 * self.r
+                  else (-math.inf, math.inf))
         # phase 1 keeps the wall on the hand that moves it towards Q
         t = _unit(n - math.pi / 2.0)
         h = 1 if (t @ self.e > 1e-9 or (abs(t @ self.e) <= 1e-9 and t @ self.ns > 0)) else -1
@@ -249,7 +247,8 @@ class Sweeper:
             last_phi = self.phi(R)
             while True:
                 f = self.frac(R)
-                ahead = self.ahead(R)
+                off = self.offset(R)
+                ahead = off >= -0.5 * self.r
                 if ahead:
                     hi, lo = max(hi, f), min(lo, f)
                 if phase == 1 and f >= far and ahead:
@@ -263,8 +262,8 @@ class Sweeper:
                     return SweepResult("swept", R, hi, -math.inf, False, total, " ".join(why),
                                        by=tuple(sorted(self._by)))
                 last_phi = ph
-                armed = armed or float((R - self.E) @ self.ns) >= 0.0
-                if armed and self.behind(R):
+                armed = armed or off >= 0.0
+                if armed and off < -self.r:
                     # the wall led behind the edge's line: what it follows there is in
                     # front of no part of the edge; the phase stops short
                     why.append(f"{phase}:behind")
