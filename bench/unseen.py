@@ -17,6 +17,7 @@ walls in raster steps, loaded through the world's map import.
 
     python bench/unseen.py --maps 20 --jobs 2            # maps 0-19 of campaign seed 0
     python bench/unseen.py --maps 40 --seed 1 --ros 2 --out /tmp/unseen
+    python bench/unseen.py --maps 20 --doors --jobs 2    # doors at the guarantee's edge
 
 Prints a row per map, a summary, and one JSON object as the last line. A false
 certificate is what ``swarmcover run`` calls one: certified while more than
@@ -59,11 +60,14 @@ def _write_pgm(pm, stem: Path) -> None:
     write_ros_map(stem, free, CELL, np.round(lo, 4))
 
 
-def write_config(seed: int, index: int, ros: bool, folder: Path, coordinator=()):
+def write_config(seed: int, index: int, ros: bool, folder: Path, coordinator=(),
+                 doors: bool = False):
     """Map ``index`` of campaign ``seed`` as a run config in ``folder``, with the
-    ``[coordinator]`` lines ``coordinator`` (``KEY = VALUE`` strings); returns (path, case)."""
-    case = make_map(seed, index, CELL if ros else 0.0)
-    name = f"unseen_s{seed}_m{index}" + ("_ros" if ros else "")
+    ``[coordinator]`` lines ``coordinator`` (``KEY = VALUE`` strings); ``doors``: the door
+    campaign's map (``bench.truth.make_map``: two rooms, a 0.40-0.50 rv door); returns
+    (path, case)."""
+    case = make_map(seed, index, CELL if ros else 0.0, doors)
+    name = f"unseen_s{seed}_m{index}" + ("_doors" if doors else "") + ("_ros" if ros else "")
     lines = [f'# bench/unseen.py: map {index} of campaign {seed} ({case.kind}'
              + (f", door {case.door_w:.2f} rv" if case.door_w else "") + ")",
              f'name = "{name}"', "rv = 1.0", "", "[map]"]
@@ -222,6 +226,9 @@ def main(argv=None) -> int:
     ap.add_argument("--maps", type=int, default=20, help="maps START .. START+N-1")
     ap.add_argument("--start", type=int, default=0)
     ap.add_argument("--seed", type=int, default=0, help="campaign (bench/truth.py's --seed)")
+    ap.add_argument("--doors", action="store_true",
+                    help="bench/truth.py's door campaign: every map two rooms joined by a "
+                         "0.40-0.50 rv door in a wall 0.05-0.30 m thick")
     ap.add_argument("--ros", type=int, default=0, metavar="K",
                     help="write every K-th map as a turned ROS map (PGM + YAML); 0: none")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes")
@@ -239,7 +246,8 @@ def main(argv=None) -> int:
             ap.error(f"--set {kv!r}: expected FIELD=VALUE")
         sets.append(f"{k.strip()} = {v.strip()}")
     return campaign(ap, a, "unseen", lambda folder: [
-        (a.seed, i, bool(a.ros) and i % a.ros == a.ros - 1, folder, a.timeout, tuple(sets))
+        (a.seed, i, bool(a.ros) and i % a.ros == a.ros - 1, folder, a.timeout, tuple(sets),
+         a.doors)
         for i in range(a.start, a.start + a.maps)], run_map, _head)
 
 if __name__ == "__main__":

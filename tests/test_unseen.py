@@ -31,6 +31,19 @@ def test_a_map_written_as_a_config_loads_as_the_same_free_area_and_source(tmp_pa
     assert cfg.sensing.noise_deg == case.noise_deg
 
 
+@pytest.mark.parametrize("index", [0, 145])
+def test_doors_writes_the_door_campaign_s_map(tmp_path, index):
+    """--doors: the config is bench/truth.py --doors's map (two rooms, a 0.40-0.50 rv
+    door; map 145 is the flush door of a 0.3 m wall that was once certified at 59.3%), not
+    the default campaign's map of that index."""
+    path, case = unseen.write_config(0, index, False, tmp_path, doors=True)
+    assert path.name == f"unseen_s0_m{index}_doors.toml"
+    assert case.kind == "two_rooms" and 0.40 <= case.door_w <= 0.50
+    wm = build_map(load_config(str(path)))
+    assert wm.free_area == pytest.approx(_free(make_map(0, index, doors=True).pm), abs=1e-3)
+    assert wm.free_area != pytest.approx(_free(make_map(0, index).pm), abs=1e-3)
+
+
 def test_one_map_runs_the_swarm_to_a_certificate_ground_truth_agrees_with(tmp_path):
     """Map 2 (a 12.7 m^2 room, 25 robots) end to end, in-process: certified, its complex
     covering the room by ground truth, no false certificate, and the row names its config."""
